@@ -1,0 +1,48 @@
+"""The ``endeff`` command: one entry point, one subcommand module each.
+
+Subcommands register themselves in ``SUBCOMMANDS`` as ``name -> 'module:function'``; the module
+is imported only when that subcommand runs, so ``endeff synth`` never imports rclpy and
+``endeff --help`` stays fast. Each module provides ``add_arguments(parser)`` and
+``run(args) -> int`` (the exit status).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    'bench': ('endeff_ros.bench', 'Time the single-frame estimator and the full pipeline.'),
+    'synth': ('endeff_ros.synth.cli', 'Generate synthetic RGB-D benchmark bags.'),
+    'sheet': ('endeff_ros.synth.sheet', 'Draw a contact sheet (PNG) of benchmark bags.'),
+    'eval': ('endeff_ros.evaluate', 'Score single-frame and temporal estimators on bags.'),
+    'process': ('endeff_ros.bag.process', 'Run the tracker on rosbag2 bags, write results.'),
+    'params': ('endeff_ros.core.params_cli', 'Print the parameter table or config YAML.'),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog='endeff', description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
+    for name, (_, helptext) in SUBCOMMANDS.items():
+        sub.add_parser(name, help=helptext, add_help=False)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    if not argv or argv[0] not in SUBCOMMANDS:
+        parser.parse_args(argv)  # prints usage / error and exits
+        return 2
+    name, rest = argv[0], argv[1:]
+    module = importlib.import_module(SUBCOMMANDS[name][0])
+    sub = argparse.ArgumentParser(prog=f'endeff {name}', description=SUBCOMMANDS[name][1])
+    module.add_arguments(sub)
+    args = sub.parse_args(rest)
+    return int(module.run(args) or 0)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

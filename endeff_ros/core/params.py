@@ -1,0 +1,192 @@
+"""The one typed parameter set of endeff_ros.
+
+Every algorithm parameter lives in :class:`EndeffParams`, with the paper's symbol, unit, range
+and meaning in its field metadata. The ROS node declares its parameters from this table, and
+``config/endeff.yaml`` is generated from it (``endeff params --yaml``) and checked against it by
+the tests, so the three never drift apart.
+
+References
+----------
+Lin, Pardàs & Casas, *Time-consistent estimation of end-effectors from RGB-D data*, 2016.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from .errors import ParameterError
+
+
+def _p(default: Any, doc: str, *, symbol: str = '', lo: float | None = None,
+       hi: float | None = None, unit: str = '', runtime: bool = True) -> Any:
+    """Declare a parameter field with its documentation and valid range."""
+    return field(default=default, metadata={
+        'doc': doc, 'symbol': symbol, 'lo': lo, 'hi': hi, 'unit': unit, 'runtime': runtime})
+
+
+@dataclass(frozen=True)
+class EndeffParams:
+    """All tuning parameters; defaults suit a person 1-4 m from a Kinect/RealSense-class camera."""
+
+    # --- Section 3: depth to foreground cloud -------------------------------------------------
+    box_min_x: float = _p(-1.6, 'Foreground box, minimum x (optical frame, right).', unit='m',
+                          lo=-20.0, hi=20.0)
+    box_max_x: float = _p(1.6, 'Foreground box, maximum x.', unit='m', lo=-20.0, hi=20.0)
+    box_min_y: float = _p(-2.0, 'Foreground box, minimum y (optical frame, down).', unit='m',
+                          lo=-20.0, hi=20.0)
+    box_max_y: float = _p(2.0, 'Foreground box, maximum y.', unit='m', lo=-20.0, hi=20.0)
+    box_min_z: float = _p(0.4, 'Foreground box, minimum z (depth).', unit='m', lo=0.0, hi=20.0)
+    box_max_z: float = _p(4.3, 'Foreground box, maximum z (depth).', unit='m', lo=0.0, hi=20.0)
+    pixel_stride: int = _p(2, 'Use every n-th pixel in u and v before back-projection.',
+                           lo=1, hi=8)
+    voxel_size: float = _p(0.025, 'Voxel grid cell for downsampling the foreground; 0 = off.',
+                           unit='m', lo=0.0, hi=0.2)
+    floor_removal: bool = _p(True, 'Fit the floor plane (RANSAC) and drop points on it.')
+    floor_distance: float = _p(0.03, 'Points closer than this to the floor plane are floor.',
+                               unit='m', lo=0.0, hi=0.5)
+    floor_max_tilt_deg: float = _p(40.0, 'Floor normal must be within this angle of -y (up).',
+                                   unit='deg', lo=0.0, hi=90.0)
+    floor_min_fraction: float = _p(0.05, 'A floor must hold at least this fraction of points.',
+                                   lo=0.0, hi=1.0)
+    floor_iterations: int = _p(64, 'RANSAC hypotheses for the floor plane.', lo=1, hi=10000)
+
+    # --- Section 4.1: narrow-band level-set expansion ------------------------------------------
+    band_delta: float = _p(0.07, 'Proximity constraint: new band points lie within this '
+                           'distance of the contour curve(t) (Eqs. 1-2).', symbol='δ_L',
+                           unit='m', lo=0.005, hi=1.0)
+    band_eta: int = _p(4, 'Density constraint: a point needs at least this many neighbours '
+                       'within δ_L (Eq. 3).', symbol='η_L', lo=1, hi=1000)
+    subband_max_points: int = _p(60, 'A sub-band (connected piece of a band) larger than this '
+                                 'is split along its main axis.', lo=2, hi=100000)
+    root_bands: int = _p(6, 'Bands of the rough expansion whose points give the refined '
+                         'centroid (size of the massive part, e.g. torso).', symbol='N',
+                         lo=1, hi=1000)
+    min_entity_points: int = _p(60, 'Connected foreground clusters smaller than this (after '
+                                'downsampling) are ignored.', lo=1, hi=1000000)
+
+    # --- Section 4.2: topology graph and extrema ------------------------------------------------
+    attach_distance: float = _p(0.05, 'Attachment: points closer than this to the other '
+                                'sub-band count towards attachment.', symbol='λ', unit='m',
+                                lo=0.001, hi=1.0)
+    attach_points: int = _p(2, 'Attachment: each sub-band needs at least this many points '
+                            'within λ of the other.', symbol='P', lo=1, hi=10000)
+    min_geodesic: float = _p(0.3, 'Iterated Dijkstra stops when the farthest node is closer '
+                             'than this to the already found paths.', symbol='g', unit='m',
+                             lo=0.0, hi=10.0)
+    max_end_effectors: int = _p(12, 'Upper bound on end-effectors per entity.', lo=1, hi=100)
+    tip_depth: float = _p(0.1, 'An end-effector is the centroid of its branch within this '
+                          'geodesic depth of the extreme.', unit='m', lo=0.0, hi=1.0)
+
+    # --- Section 5: predict-update tracking ------------------------------------------------------
+    flow_method: str = _p('dis', "Dense optical flow for the predict phase: 'dis' or "
+                          "'farneback' (LDOF is not in OpenCV).", runtime=False)
+    related_similarity: float = _p(0.5, 'Case A: matched candidates with similarity above '
+                                   'this are the same end-effector.', symbol='ε_a',
+                                   lo=0.0, hi=1.0)
+    unrelated_ratio: float = _p(1.0, 'Case B lower bound: ε_b is this factor over '
+                                '(1 + max(dist_G(e1), dist_G(e2))) as a similarity.',
+                                symbol='ε_b', lo=0.0, hi=10.0)
+    similarity_scale: float = _p(0.1, 'Similarity = 1 / (1 + geodesic / scale) between two '
+                                 'candidates in the current graph.', unit='m', lo=0.001,
+                                 hi=10.0)
+    keep_frames: int = _p(5, 'Case C: an unmatched predicted end-effector is kept at most '
+                          'this many frames.', symbol='T', lo=0, hi=1000)
+    memory_sigma: float = _p(0.8, 'Geodesic memory penalty, α = σ^k (Eqs. 8-9).', symbol='σ',
+                             lo=0.0, hi=1.0)
+    max_rectify_distance: float = _p(0.15, 'A prediction farther than this from every '
+                                     'current point is dropped.', unit='m', lo=0.0, hi=5.0)
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            lo, hi = f.metadata['lo'], f.metadata['hi']
+            if isinstance(value, bool) or isinstance(value, str):
+                continue
+            if lo is not None and value < lo or hi is not None and value > hi:
+                msg = f'parameter {f.name}={value!r} is outside [{lo}, {hi}]'
+                raise ParameterError(msg)
+        for axis in 'xyz':
+            if getattr(self, f'box_min_{axis}') >= getattr(self, f'box_max_{axis}'):
+                msg = f'foreground box: box_min_{axis} must be smaller than box_max_{axis}'
+                raise ParameterError(msg)
+        if self.flow_method not in ('dis', 'farneback'):
+            msg = f"flow_method must be 'dis' or 'farneback', not {self.flow_method!r}"
+            raise ParameterError(msg)
+
+    def replace(self, **changes: Any) -> EndeffParams:
+        """Return a copy with ``changes`` applied (validated)."""
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> EndeffParams:
+        """Build from a flat mapping; unknown keys and wrong types are errors."""
+        known = {f.name: f for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - set(known))
+        if unknown:
+            msg = f'unknown parameter(s): {", ".join(unknown)}'
+            raise ParameterError(msg)
+        typed = {}
+        for name, value in values.items():
+            want = type(known[name].default)
+            if want is float and isinstance(value, int) and not isinstance(value, bool):
+                value = float(value)
+            if type(value) is not want:
+                msg = f'parameter {name} must be {want.__name__}, got {value!r}'
+                raise ParameterError(msg)
+            typed[name] = value
+        return cls(**typed)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Flat mapping of every parameter."""
+        return dataclasses.asdict(self)
+
+
+def describe() -> list[dict[str, Any]]:
+    """One row per parameter: name, type, default, doc, symbol, unit, lo, hi, runtime."""
+    rows = []
+    for f in dataclasses.fields(EndeffParams):
+        rows.append({'name': f.name, 'type': type(f.default).__name__, 'default': f.default,
+                     **f.metadata})
+    return rows
+
+
+NODE_NAME = 'endeff_node'
+
+
+def to_ros_yaml(params: EndeffParams | None = None, node_name: str = NODE_NAME) -> str:
+    """Render the parameter set as a ROS 2 parameter file (``config/endeff.yaml``)."""
+    params = params or EndeffParams()
+    lines = ['# Generated from endeff_ros.core.params.EndeffParams by `endeff params --yaml`.',
+             '# Do not edit by hand: a test checks this file against the dataclass.',
+             f'{node_name}:', '  ros__parameters:']
+    for row in describe():
+        symbol = f' [{row["symbol"]}]' if row['symbol'] else ''
+        unit = f' ({row["unit"]})' if row['unit'] else ''
+        lines.append(f'    # {row["doc"]}{symbol}{unit}')
+        value = getattr(params, row['name'])
+        if isinstance(value, bool):
+            text = 'true' if value else 'false'
+        elif isinstance(value, str):
+            text = f"'{value}'"
+        else:
+            text = repr(value)
+        lines.append(f'    {row["name"]}: {text}')
+    return '\n'.join(lines) + '\n'
+
+
+def load_yaml(path: str, node_name: str = NODE_NAME) -> EndeffParams:
+    """Read a ROS 2 parameter file (or a flat YAML mapping) into :class:`EndeffParams`."""
+    import yaml
+
+    with open(path, encoding='utf-8') as fh:
+        data = yaml.safe_load(fh) or {}
+    if not isinstance(data, dict):
+        msg = f'{path}: expected a mapping of parameters'
+        raise ParameterError(msg)
+    for key in (node_name, '/**'):
+        if key in data and isinstance(data[key], dict):
+            data = data[key].get('ros__parameters', data[key])
+            break
+    return EndeffParams.from_dict(data)
