@@ -1,0 +1,206 @@
+"""Scoring of estimated end-effectors against ground truth (the paper's Section 6.1).
+
+Pure numpy/scipy: no ROS imports, so ``endeff eval`` and the tests run without ROS.
+
+Per scored frame t the estimated end-effectors are matched one-to-one to the ground-truth points
+by the Hungarian method on Euclidean distances (minimum total distance); a matched pair within
+``threshold`` (0.15 m) is a true positive (TP). Every estimate that is not a TP is a false
+positive (FP).
+
+- Recall_t = TP_t / #GT_t                                           (Eq. 10)
+- mean error = mean Euclidean distance over all TP pairs              (Eq. 11)
+- FPR_t = FP_t / #estimated_t, 0 when nothing was estimated           (Eq. 12)
+
+A sequence's recall and FPR are the means over its scored frames; its mean error is the mean over
+all TP pairs of the sequence. Overall figures are the means over sequences.
+
+Conventions for cases the paper does not cover (documented in the report, never silently):
+
+- a scored frame whose ground truth is empty has no defined recall; it counts for FPR only;
+- a sequence without any TP has no mean error (``nan``; ``None`` in JSON); a sequence without
+  scored frames has no recall and no FPR; undefined values are left out of the overall means.
+
+References
+----------
+Lin, Pardàs & Casas, *Time-consistent estimation of end-effectors from RGB-D data*, 2016,
+Section 6.1, Eqs. 10-12.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable, Sequence
+
+    import numpy.typing as npt
+
+MATCH_THRESHOLD_M = 0.15
+"""A Hungarian match within this distance (metres) is a true positive (Section 6.1)."""
+
+
+def _as_points(points: npt.ArrayLike | None, what: str) -> npt.NDArray[np.float64]:
+    """Validate an (N, 3) array of finite positions in metres."""
+    if points is None:
+        return np.zeros((0, 3))
+    arr = np.asarray(points, dtype=np.float64)
+    if arr.size == 0:
+        return np.zeros((0, 3))
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        msg = f'{what} must be an (N, 3) array of positions, got shape {arr.shape}'
+        raise ValueError(msg)
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.count_nonzero(~np.all(np.isfinite(arr), axis=1)))
+        msg = f'{what} contains {bad} non-finite position(s)'
+        raise ValueError(msg)
+    return arr
+
+
+@dataclass(frozen=True)
+class FrameScore:
+    """Scores of one frame.
+
+    ``errors`` holds the distances (m) of the TP pairs; ``matches`` the (estimate, ground truth)
+    index pairs of the TPs. ``recall`` is ``nan`` when the frame has no ground-truth points.
+    """
+
+    n_gt: int
+    n_est: int
+    tp: int
+    errors: npt.NDArray[np.float64]
+    matches: npt.NDArray[np.intp]
+
+    @property
+    def fp(self) -> int:
+        """Estimates that are not true positives."""
+        return self.n_est - self.tp
+
+    @property
+    def recall(self) -> float:
+        """Eq. 10: TP / #GT (``nan`` without ground-truth points)."""
+        return self.tp / self.n_gt if self.n_gt else math.nan
+
+    @property
+    def fpr(self) -> float:
+        """Eq. 12: FP / #estimated, 0 when nothing was estimated."""
+        return self.fp / self.n_est if self.n_est else 0.0
+
+
+def score_frame(estimated: npt.ArrayLike | None, ground_truth: npt.ArrayLike | None, *,
+                threshold: float = MATCH_THRESHOLD_M) -> FrameScore:
+    """Match (M, 3) ``estimated`` to (N, 3) ``ground_truth`` positions (metres), one-to-one.
+
+    Hungarian assignment (``scipy.optimize.linear_sum_assignment``) minimising the total
+    Euclidean distance; matched pairs within ``threshold`` metres are true positives.
+
+    Raises
+    ------
+    ValueError
+        If an input is not (N, 3) or holds non-finite values, or ``threshold`` is negative.
+    """
+    if not threshold >= 0:
+        msg = f'match threshold must be >= 0 m, got {threshold}'
+        raise ValueError(msg)
+    est = _as_points(estimated, 'estimated end-effectors')
+    gt = _as_points(ground_truth, 'ground-truth end-effectors')
+    if len(est) == 0 or len(gt) == 0:
+        return FrameScore(len(gt), len(est), 0, np.zeros(0), np.zeros((0, 2), dtype=np.intp))
+    dist = np.linalg.norm(est[:, None, :] - gt[None, :, :], axis=2)
+    rows, cols = linear_sum_assignment(dist)
+    d = dist[rows, cols]
+    ok = d <= threshold
+    matches = np.stack([rows[ok], cols[ok]], axis=1).astype(np.intp)
+    return FrameScore(len(gt), len(est), int(ok.sum()), d[ok], matches)
+
+
+@dataclass(frozen=True)
+class MethodScore:
+    """One method's scores on one sequence (or the mean over sequences)."""
+
+    recall: float
+    mean_error_m: float
+    fpr: float
+
+    def to_json(self) -> dict[str, float | None]:
+        """The spec's ``{"recall", "mean_error_m", "fpr"}`` with ``None`` for undefined values."""
+        return {'recall': _json_float(self.recall), 'mean_error_m': _json_float(self.mean_error_m),
+                'fpr': _json_float(self.fpr)}
+
+
+def _json_float(value: float) -> float | None:
+    return None if value is None or not math.isfinite(value) else float(value)
+
+
+@dataclass
+class SequenceScorer:
+    """Accumulates one method's frame scores over a sequence.
+
+    Call :meth:`add` once per processed frame (``ground_truth=None`` for frames that are not
+    annotated: they are counted but not scored).
+    """
+
+    threshold: float = MATCH_THRESHOLD_M
+    frames: int = 0
+    recalls: list[float] = field(default_factory=list)
+    fprs: list[float] = field(default_factory=list)
+    errors: list[float] = field(default_factory=list)
+    tp: int = 0
+    n_gt: int = 0
+    n_est: int = 0
+
+    def add(self, estimated: npt.ArrayLike | None,
+            ground_truth: npt.ArrayLike | None) -> FrameScore | None:
+        """Score one frame; returns its :class:`FrameScore` (None when not annotated)."""
+        self.frames += 1
+        if ground_truth is None:
+            return None
+        score = score_frame(estimated, ground_truth, threshold=self.threshold)
+        self.recalls.append(score.recall)
+        self.fprs.append(score.fpr)
+        self.errors.extend(score.errors.tolist())
+        self.tp += score.tp
+        self.n_gt += score.n_gt
+        self.n_est += score.n_est
+        return score
+
+    @property
+    def scored_frames(self) -> int:
+        """Frames with ground truth."""
+        return len(self.fprs)
+
+    def result(self) -> MethodScore:
+        """Sequence recall and FPR (means over scored frames), mean error over all TP pairs."""
+        return MethodScore(_nanmean(self.recalls), _nanmean(self.errors), _nanmean(self.fprs))
+
+
+def _nanmean(values: Iterable[float]) -> float:
+    """Mean of the finite values; ``nan`` when there are none."""
+    arr = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
+    return float(arr.mean()) if arr.size else math.nan
+
+
+def mean_over_sequences(scores: Sequence[MethodScore]) -> MethodScore:
+    """Overall figures: the mean over sequences of each defined value."""
+    return MethodScore(_nanmean(s.recall for s in scores),
+                       _nanmean(s.mean_error_m for s in scores),
+                       _nanmean(s.fpr for s in scores))
+
+
+def score_sequence(estimates: Iterable[npt.ArrayLike | None],
+                   ground_truths: Iterable[npt.ArrayLike | None], *,
+                   threshold: float = MATCH_THRESHOLD_M) -> MethodScore:
+    """Score a whole sequence given per-frame estimates and ground truth (None = not scored)."""
+    scorer = SequenceScorer(threshold=threshold)
+    for est, gt in zip(estimates, ground_truths, strict=True):
+        scorer.add(est, gt)
+    return scorer.result()
+
+
+def summary_dict(scorer: SequenceScorer) -> dict[str, Any]:
+    """Counts behind a method's sequence score (extra report keys)."""
+    return {'tp': scorer.tp, 'gt_points': scorer.n_gt, 'estimated': scorer.n_est}

@@ -1,0 +1,107 @@
+"""Section 6.1 scoring (Eqs. 10-12) on hand-computed cases."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from endeff_ros.scoring import (
+    MethodScore,
+    SequenceScorer,
+    mean_over_sequences,
+    score_frame,
+    score_sequence,
+)
+
+
+def test_perfect_frame() -> None:
+    gt = np.array([[0.0, 0.0, 2.0], [0.5, 0.0, 2.0], [0.0, 0.5, 2.0]])
+    s = score_frame(gt + [0.0, 0.0, 0.03], gt)
+    assert (s.tp, s.fp, s.n_gt, s.n_est) == (3, 0, 3, 3)
+    assert s.recall == 1.0 and s.fpr == 0.0
+    np.testing.assert_allclose(s.errors, [0.03, 0.03, 0.03])
+
+
+def test_threshold_is_inclusive_and_misses_are_fp() -> None:
+    gt = np.array([[0.0, 0.0, 2.0], [1.0, 0.0, 2.0]])
+    # First estimate exactly 0.15 m away (TP), second 0.2 m away (matched but FP), third extra.
+    est = np.array([[0.15, 0.0, 2.0], [1.0, 0.2, 2.0], [5.0, 5.0, 5.0]])
+    s = score_frame(est, gt)
+    assert s.tp == 1 and s.fp == 2
+    assert s.recall == pytest.approx(0.5)
+    assert s.fpr == pytest.approx(2 / 3)
+    np.testing.assert_allclose(s.errors, [0.15])
+    assert s.matches.tolist() == [[0, 0]]
+
+
+def test_one_to_one_matching() -> None:
+    # Two estimates near the same GT point: only one can match it.
+    gt = np.array([[0.0, 0.0, 2.0]])
+    est = np.array([[0.0, 0.0, 2.05], [0.0, 0.0, 2.01]])
+    s = score_frame(est, gt)
+    assert s.tp == 1 and s.fp == 1
+    assert s.recall == 1.0 and s.fpr == 0.5
+    np.testing.assert_allclose(s.errors, [0.01])
+
+
+def test_hungarian_minimises_total_distance() -> None:
+    # Greedy nearest-first would pair e0-g1 (0.05) and leave e1-g0 at 0.30 (one TP); the
+    # minimum-total assignment pairs e0-g0 (0.10) and e1-g1 (0.10): two TPs.
+    gt = np.array([[0.0, 0.0, 0.0], [0.15, 0.0, 0.0]])
+    est = np.array([[0.10, 0.0, 0.0], [0.25, 0.0, 0.0]])
+    s = score_frame(est, gt)
+    assert s.tp == 2
+    np.testing.assert_allclose(sorted(s.errors), [0.10, 0.10])
+
+
+def test_empty_cases() -> None:
+    gt = np.array([[0.0, 0.0, 2.0], [1.0, 0.0, 2.0]])
+    none = score_frame(np.zeros((0, 3)), gt)
+    assert none.recall == 0.0 and none.fpr == 0.0  # Eq. 12: 0 when nothing is estimated
+    no_gt = score_frame(gt, np.zeros((0, 3)))
+    assert math.isnan(no_gt.recall) and no_gt.fpr == 1.0
+    assert score_frame(None, gt).n_est == 0
+
+
+def test_bad_input_is_a_clear_error() -> None:
+    with pytest.raises(ValueError, match='non-finite'):
+        score_frame([[np.nan, 0.0, 1.0]], [[0.0, 0.0, 1.0]])
+    with pytest.raises(ValueError, match=r'\(N, 3\)'):
+        score_frame([[0.0, 1.0]], [[0.0, 0.0, 1.0]])
+
+
+def test_sequence_means() -> None:
+    gt = np.array([[0.0, 0.0, 2.0], [1.0, 0.0, 2.0]])
+    scorer = SequenceScorer()
+    # Frame 1: both found (errors 0.02, 0.04) -> recall 1, FPR 0.
+    scorer.add(gt + [[0.02, 0, 0], [0.04, 0, 0]], gt)
+    # Frame 2: one found (error 0.06) plus one FP -> recall 0.5, FPR 0.5.
+    scorer.add([[0.06, 0.0, 2.0], [3.0, 3.0, 3.0]], gt)
+    # Frame 3: not annotated -> processed, not scored.
+    scorer.add([[9.0, 9.0, 9.0]], None)
+    # Frame 4: nothing estimated -> recall 0, FPR 0.
+    scorer.add(np.zeros((0, 3)), gt)
+    r = scorer.result()
+    assert scorer.frames == 4 and scorer.scored_frames == 3
+    assert r.recall == pytest.approx((1 + 0.5 + 0) / 3)
+    assert r.fpr == pytest.approx((0 + 0.5 + 0) / 3)
+    # Eq. 11 over all TP pairs, not the mean of per-frame means.
+    assert r.mean_error_m == pytest.approx((0.02 + 0.04 + 0.06) / 3)
+    assert scorer.tp == 3
+
+
+def test_score_sequence_and_overall() -> None:
+    gt = [[[0.0, 0.0, 1.0]]] * 2
+    a = score_sequence([[[0.0, 0.0, 1.1]], [[0.0, 0.0, 1.5]]], gt)
+    assert a.recall == pytest.approx(0.5) and a.fpr == pytest.approx(0.5)
+    assert a.mean_error_m == pytest.approx(0.1)
+    b = MethodScore(recall=1.0, mean_error_m=math.nan, fpr=0.0)
+    overall = mean_over_sequences([a, b])
+    assert overall.recall == pytest.approx(0.75)
+    assert overall.fpr == pytest.approx(0.25)
+    assert overall.mean_error_m == pytest.approx(0.1)  # undefined values are left out
+    assert b.to_json() == {'recall': 1.0, 'mean_error_m': None, 'fpr': 0.0}
+    with pytest.raises(ValueError):
+        score_sequence([None], [None, None])
