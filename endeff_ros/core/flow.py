@@ -1,0 +1,346 @@
+"""Dense optical flow and 3D scene flow for the predict phase (Section 5.1).
+
+The paper propagates the end-effectors E_t of frame t to frame t+1 with forward optical flow
+between the colour images I_color^t and I_color^{t+1}, back-projected to 3D scene flow with the
+depth images and the camera parameters (the dynamic model Dnc(E_t, θ_t)). The paper used Large
+Displacement Optical Flow (LDOF), which is not in OpenCV; :class:`FlowEstimator` offers
+OpenCV's DIS (Kroeger et al., 2016) and Farneback (2003) instead, and :func:`propagate_points`
+turns the flow into the predicted 3D positions E_{t+1}^{pr}.
+
+Choice of the default (measured)
+--------------------------------
+Synthetic 640x480 pairs with exact flow (:mod:`endeff_ros.core.flow_eval`): a textured blob
+(160x100 px, a forearm and hand at ~2 m) moving by 2-25 px with up to 4 deg rotation and 4 %
+scale over a textured static background (a torso: motion discontinuity, occlusions not scored),
+plus a whole-image pan; 3 textures per case, sensor noise sigma 2. EPE = endpoint error in px
+(mean over all scored pixels; at the moving object), time = median single-thread call of
+:meth:`FlowEstimator.flow` (``cv2.setNumThreads(1)``, grayscale conversion and resizing
+included). Produced by::
+
+    .venv/bin/python -m endeff_ros.core.flow_eval --repeats 15
+
+=============  =====  ========  ========  =========  =======  ===============================
+method         scale  EPE mean  EPE obj   obj worst  ms 1 th  obj EPE by case 2/5/10/15/25 px
+=============  =====  ========  ========  =========  =======  ===============================
+dis_ultrafast  1.0    0.13      1.59      6.95       3.80     0.40 0.72 1.22 2.21 3.39
+dis_ultrafast  0.5    0.29      4.49      23.17      2.29     0.81 1.67 2.93 5.34 11.69
+dis_fast       1.0    0.11      1.52      6.69       7.33     0.40 0.67 1.13 1.99 3.41
+dis_fast       0.5    0.31      5.85      24.90      2.26     0.99 2.17 2.95 5.61 17.53
+dis_medium     1.0    0.05      0.46      0.93       37.01    0.15 0.26 0.41 0.80 0.69
+dis_medium     0.5    0.12      1.68      10.93      9.35     0.39 0.66 1.09 1.67 4.58
+farneback      1.0    0.19      3.49      24.84      68.46    0.17 0.38 0.95 3.96 12.01
+farneback      0.5    0.20      3.73      25.06      23.59    0.28 0.66 1.31 4.20 12.18
+=============  =====  ========  ========  =========  =======  ===============================
+
+(Python 3.11, OpenCV 5.0.0, 2-core VM shared with other jobs: times vary by ~0.5 ms run to run;
+an earlier run gave 1.72 ms for dis_ultrafast at 0.5 and 2.55 ms for dis_fast at 0.5.)
+
+Decision. The flow budget in the full pipeline is about 3 ms per frame on one core (pipeline
+<= 12 ms). Farneback is out (17-68 ms, and it loses large motions: 12 px error at 25 px).
+DIS MEDIUM is the most accurate but costs 9-37 ms. DIS ULTRAFAST/FAST at full resolution are
+accurate (1.5-1.6 px at the object) but cost 3.8-7 ms, over budget. Of the two that fit, DIS
+ULTRAFAST at scale 0.5 is the default (``method='dis'``, ``scale=0.5``): it is as fast as FAST
+at 0.5 or faster and more accurate at the moving object in every case (4.5 vs 5.9 px mean). Its
+error grows with the displacement: below 1 px at 2 px motion, ~3 px at 10 px (about 1 cm at
+2 m with f = 525 px), 5-12 px at 15-25 px (fast punches, 2-3 m/s at 30 Hz). Those are still
+inside the tracker's rectification distance, and the update phase relies on the current
+detection rather than on the prediction whenever one exists. With more time per frame,
+``FlowEstimator('dis_ultrafast', scale=1.0)`` cuts the object error by 3x for ~1.5 ms more.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import cv2
+import numpy as np
+
+from .errors import InputError
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+    from .types import Intrinsics
+
+#: Methods accepted by :class:`FlowEstimator`. ``'dis'`` is the measured default (ULTRAFAST).
+METHODS: tuple[str, ...] = ('dis', 'dis_ultrafast', 'dis_fast', 'dis_medium', 'farneback')
+
+_DIS_PRESETS = {
+    'dis': cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
+    'dis_ultrafast': cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
+    'dis_fast': cv2.DISOPTICAL_FLOW_PRESET_FAST,
+    'dis_medium': cv2.DISOPTICAL_FLOW_PRESET_MEDIUM,
+}
+
+#: Farneback parameters (pyr_scale, levels, winsize, iterations, poly_n, poly_sigma, flags):
+#: OpenCV's sample values with one more pyramid level for displacements up to ~25 px.
+FARNEBACK_PARAMS: tuple[float, int, int, int, int, float, int] = (0.5, 4, 15, 3, 5, 1.2, 0)
+
+
+class FlowEstimator:
+    """Forward dense optical flow between consecutive colour frames (Section 5.1, θ_t).
+
+    Parameters
+    ----------
+    method:
+        One of :data:`METHODS`. ``'dis'`` is DIS with the ULTRAFAST preset (chosen by
+        measurement, see the module docstring); ``'dis_fast'`` and ``'dis_medium'`` are the
+        slower presets; ``'farneback'`` is Farneback's polynomial expansion.
+    scale:
+        The flow is computed on grayscale images resized by this factor (0 < scale <= 1) and
+        the vectors are rescaled to full resolution. 0.5 is ~4x faster than 1.0 and, for the
+        smooth motion of body parts, about as accurate.
+
+    The estimator holds one OpenCV algorithm object; it is not thread-safe. Thread count is
+    the caller's choice (``cv2.setNumThreads``).
+    """
+
+    def __init__(self, method: str = 'dis', *, scale: float = 0.5) -> None:
+        if method not in METHODS:
+            msg = f'unknown optical flow method {method!r}; choose one of {", ".join(METHODS)}'
+            raise InputError(msg)
+        if not (isinstance(scale, (int, float)) and 0.0 < float(scale) <= 1.0):
+            msg = f'flow scale must be in (0, 1], got {scale!r}'
+            raise InputError(msg)
+        self.method = method
+        self.scale = float(scale)
+        self._dis: Any = None
+        if method in _DIS_PRESETS:
+            self._dis = cv2.DISOpticalFlow.create(_DIS_PRESETS[method])
+
+    def __repr__(self) -> str:
+        return f'FlowEstimator(method={self.method!r}, scale={self.scale})'
+
+    @staticmethod
+    def _gray(image: npt.NDArray[Any], name: str) -> npt.NDArray[np.uint8]:
+        image = np.asarray(image)
+        if image.dtype != np.uint8:
+            msg = f'{name} must be uint8, got {image.dtype}'
+            raise InputError(msg)
+        if image.ndim == 2:
+            return np.ascontiguousarray(image)
+        if image.ndim == 3 and image.shape[2] == 3:
+            return cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY)
+        if image.ndim == 3 and image.shape[2] == 1:
+            return np.ascontiguousarray(image[:, :, 0])
+        msg = f'{name} must be (H, W, 3) RGB or (H, W) grayscale, got shape {image.shape}'
+        raise InputError(msg)
+
+    def flow(self, prev_rgb: npt.NDArray[np.uint8],
+             cur_rgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
+        """Forward flow from ``prev_rgb`` (frame t) to ``cur_rgb`` (frame t+1).
+
+        Both images are (H, W, 3) uint8 RGB (or (H, W) grayscale) of the same size. Returns
+        (H, W, 2) float32: the displacement (du, dv) in full-resolution pixels of every pixel
+        of the previous frame, so that ``prev[v, u] ~ cur[v + dv, u + du]``.
+        """
+        prev = self._gray(prev_rgb, 'previous colour image')
+        cur = self._gray(cur_rgb, 'current colour image')
+        if prev.shape != cur.shape:
+            msg = (f'colour images differ in size: previous {prev.shape[1]}x{prev.shape[0]}, '
+                   f'current {cur.shape[1]}x{cur.shape[0]}')
+            raise InputError(msg)
+        h, w = prev.shape
+        if h < 8 or w < 8:
+            msg = f'colour images of {w}x{h} are too small for optical flow (need >= 8x8)'
+            raise InputError(msg)
+        sw, sh = w, h
+        if self.scale < 1.0:
+            sw, sh = max(8, round(w * self.scale)), max(8, round(h * self.scale))
+            prev = cv2.resize(prev, (sw, sh), interpolation=cv2.INTER_AREA)
+            cur = cv2.resize(cur, (sw, sh), interpolation=cv2.INTER_AREA)
+        if self._dis is not None:
+            small = self._dis.calc(prev, cur, None)
+        else:
+            small = cv2.calcOpticalFlowFarneback(prev, cur, None, *FARNEBACK_PARAMS)
+        if (sw, sh) == (w, h):
+            return np.ascontiguousarray(small, dtype=np.float32)
+        full = cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
+        if w * sh == h * sw:
+            full *= np.float32(w / sw)
+        else:
+            full *= np.array([w / sw, h / sh], dtype=np.float32)
+        return full
+
+
+def flow_benchmark(**kwargs: Any) -> dict[str, Any]:
+    """Accuracy / speed table of the flow methods (see :func:`.flow_eval.flow_benchmark`)."""
+    from .flow_eval import flow_benchmark as run
+
+    return run(**kwargs)
+
+
+# --- 3D scene flow: propagate points (Section 5.1, E_{t+1}^{pr} = Dnc(E_t, θ_t)) -------------
+
+def _offsets(window: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Row and column offsets of a square ``window`` (odd side, pixels), each (K,)."""
+    half = window // 2
+    d = np.arange(-half, half + 1)
+    dr, dc = np.meshgrid(d, d, indexing='ij')
+    return dr.ravel(), dc.ravel()
+
+
+def _gather(image: npt.NDArray[Any], rows: npt.NDArray[Any],
+            cols: npt.NDArray[Any]) -> npt.NDArray[np.float64]:
+    """``image[rows, cols]`` as float64 for (N, K) float pixel indices; outside -> NaN."""
+    h, w = image.shape[:2]
+    inside = (rows >= 0) & (rows <= h - 1) & (cols >= 0) & (cols <= w - 1)
+    r = np.clip(np.nan_to_num(rows, nan=-1.0), 0, h - 1).astype(np.intp)
+    c = np.clip(np.nan_to_num(cols, nan=-1.0), 0, w - 1).astype(np.intp)
+    values = image[r, c].astype(np.float64)
+    values[~inside] = np.nan
+    return values
+
+
+def _masked_median(values: npt.NDArray[np.float64],
+                   valid: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.float64],
+                                                           npt.NDArray[np.int64]]:
+    """Row-wise median of ``values`` (N, K) over ``valid``; (N,) medians (NaN if none), counts."""
+    n = values.shape[0]
+    count = valid.sum(axis=1)
+    if values.shape[1] == 0:
+        return np.full(n, np.nan), count
+    ordered = np.sort(np.where(valid, values, np.inf), axis=1)
+    rows = np.arange(n)
+    lo = np.maximum((count - 1) // 2, 0)
+    hi = np.minimum(count // 2, values.shape[1] - 1)
+    with np.errstate(invalid='ignore'):
+        median = 0.5 * (ordered[rows, lo] + ordered[rows, hi])
+    median[count == 0] = np.nan
+    return median, count
+
+
+def _check_image(name: str, image: Any, shape: tuple[int, ...]) -> npt.NDArray[Any]:
+    array = np.asarray(image)
+    if array.shape != shape:
+        got = 'x'.join(str(s) for s in array.shape)
+        want = 'x'.join(str(s) for s in shape)
+        msg = f'{name} has shape {got} but the camera info implies {want} (H x W[ x 2])'
+        raise InputError(msg)
+    return array
+
+
+def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
+                     prev_depth: npt.NDArray[np.float32], cur_depth: npt.NDArray[np.float32],
+                     intrinsics: Intrinsics, *, window: int = 7, depth_tolerance: float = 0.1,
+                     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+    """Move 3D points of frame t to frame t+1 with optical flow and depth (3D scene flow).
+
+    Parameters
+    ----------
+    points:
+        (N, 3) float64 end-effector positions E_t in the optical frame of frame t, metres.
+    flow:
+        (H, W, 2) forward optical flow t -> t+1 in pixels (:meth:`FlowEstimator.flow`).
+    prev_depth, cur_depth:
+        (H, W) float32 depth of frames t and t+1 in metres, NaN (or <= 0) where invalid,
+        registered to the colour images.
+    intrinsics:
+        Pinhole K of the depth images (same for both frames), image size H x W.
+    window:
+        Side of the square pixel window (odd, >= 1) for the robust reads; the fallback window is
+        ``max(3 * window, 21)``.
+    depth_tolerance:
+        Metres. A pixel of the window belongs to the point's surface if its depth is within this
+        of the point's depth (frame t) or of the expected depth (frame t+1).
+
+    Returns
+    -------
+    (N, 3) float64 predicted points E_{t+1}^{pr} (always finite) and (N,) bool ``reliable``.
+
+    Method: project each point into frame t; the flow is the median over the window of the
+    pixels whose flow is finite and whose previous depth is within ``depth_tolerance`` of the
+    point's z (so a hand in front of the torso takes the hand's motion, not the torso's). The
+    neighbourhood's depth change Δz is the median of ``cur_depth(p + flow(p)) - prev_depth(p)``
+    over those pixels. At the moved pixel the new depth is the median of the current depths
+    within ``depth_tolerance`` of z + Δz; the point is back-projected with it.
+
+    Fallbacks (``reliable`` False): too few valid pixels -> the larger window; still none ->
+    zero motion (flow) or z + Δz (depth). Points that do not project into frame t (outside the
+    image or z <= 0) are returned unchanged.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        msg = f'points must be an (N, 3) array, got shape {pts.shape}'
+        raise InputError(msg)
+    if not np.isfinite(pts).all():
+        msg = 'points must be finite (got NaN or inf coordinates)'
+        raise InputError(msg)
+    if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1 \
+            or window % 2 == 0:
+        msg = f'window must be an odd integer >= 1, got {window!r}'
+        raise InputError(msg)
+    if not (np.isfinite(depth_tolerance) and depth_tolerance > 0):
+        msg = f'depth_tolerance must be a positive number of metres, got {depth_tolerance!r}'
+        raise InputError(msg)
+    h, w = intrinsics.height, intrinsics.width
+    flow = _check_image('flow', flow, (h, w, 2))
+    prev_depth = _check_image('previous depth', prev_depth, (h, w))
+    cur_depth = _check_image('current depth', cur_depth, (h, w))
+    n = pts.shape[0]
+    if n == 0:
+        return pts.copy(), np.zeros(0, dtype=bool)
+
+    x, y, z = pts[:, 0], pts[:, 1], pts[:, 2]
+    front = z > 1e-6
+    zs = np.where(front, z, 1.0)
+    u = intrinsics.fx * x / zs + intrinsics.cx
+    v = intrinsics.fy * y / zs + intrinsics.cy
+    inside = front & (u > -0.5) & (u < w - 0.5) & (v > -0.5) & (v < h - 0.5)
+    ur, vr = np.rint(np.where(inside, u, 0.0)), np.rint(np.where(inside, v, 0.0))
+
+    small, large = window, max(3 * window, 21) | 1
+    min_valid = {small: min(3, small * small), large: 3}
+
+    def flow_read(win: int) -> tuple[npt.NDArray[np.float64], ...]:
+        """Median flow (du, dv), neighbourhood Δz and whether enough pixels were valid."""
+        dr, dc = _offsets(win)
+        rows, cols = vr[:, None] + dr, ur[:, None] + dc
+        f = _gather(flow, rows, cols)
+        d0 = _gather(prev_depth, rows, cols)
+        with np.errstate(invalid='ignore'):
+            ok = (np.isfinite(f).all(axis=2) & np.isfinite(d0) & (d0 > 0)
+                  & (np.abs(d0 - z[:, None]) <= depth_tolerance))
+        du, count = _masked_median(f[:, :, 0], ok)
+        dv, _ = _masked_median(f[:, :, 1], ok)
+        d1 = _gather(cur_depth, np.where(ok, np.rint(rows + f[:, :, 1]), -1.0),
+                     np.where(ok, np.rint(cols + f[:, :, 0]), -1.0))
+        with np.errstate(invalid='ignore'):
+            dz_ok = ok & np.isfinite(d1) & (d1 > 0)
+        dz, _ = _masked_median(d1 - d0, dz_ok)
+        return du, dv, dz, count >= min_valid[win]
+
+    du, dv, dz, flow_ok = flow_read(small)
+    du2, dv2, dz2, flow_ok2 = flow_read(large)
+    use2 = ~flow_ok & flow_ok2
+    du = np.where(flow_ok, du, np.where(use2, du2, 0.0))
+    dv = np.where(flow_ok, dv, np.where(use2, dv2, 0.0))
+    dz = np.where(flow_ok, dz, np.where(use2, dz2, np.nan))
+    dz = np.where(np.isfinite(dz), dz, 0.0)
+
+    tu, tv = u + du, v + dv
+    target_inside = (tu > -0.5) & (tu < w - 0.5) & (tv > -0.5) & (tv < h - 0.5)
+    z_expected = z + dz
+    tr, tc = np.rint(np.where(inside, tv, 0.0)), np.rint(np.where(inside, tu, 0.0))
+
+    def depth_read(win: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+        dr, dc = _offsets(win)
+        d = _gather(cur_depth, tr[:, None] + dr, tc[:, None] + dc)
+        with np.errstate(invalid='ignore'):
+            ok = np.isfinite(d) & (d > 0) & (np.abs(d - z_expected[:, None]) <= depth_tolerance)
+        med, count = _masked_median(d, ok)
+        return med, count >= min_valid[win]
+
+    z1, depth_ok = depth_read(small)
+    z2, depth_ok2 = depth_read(large)
+    z_new = np.where(depth_ok, z1, np.where(depth_ok2, z2, z_expected))
+    z_new = np.where(np.isfinite(z_new) & (z_new > 1e-6), z_new, z)
+
+    out = pts.copy()
+    out[:, 0] = np.where(inside, (tu - intrinsics.cx) * z_new / intrinsics.fx, x)
+    out[:, 1] = np.where(inside, (tv - intrinsics.cy) * z_new / intrinsics.fy, y)
+    out[:, 2] = np.where(inside, z_new, z)
+    bad = ~np.isfinite(out).all(axis=1)
+    out[bad] = pts[bad]
+    reliable = inside & flow_ok & target_inside & depth_ok & ~bad
+    return out, reliable
