@@ -1,0 +1,509 @@
+"""Read RGB-D frames and ground truth from rosbag2 bags (sqlite3 or mcap, compressed or not).
+
+A bag is a rosbag2 directory (with ``metadata.yaml``) or a single ``.mcap`` / ``.db3`` file.
+Messages are deserialised with ``rosbags`` (definitions embedded in the bag, the Jazzy typestore
+as fallback), converted by :mod:`endeff_ros.ros.convert` (duck-typed, no rclpy) and synchronised
+exactly as the node does: :class:`endeff_ros.sync.ApproximateTimeSynchronizer` over colour and
+depth with camera info latched, messages fed in header-stamp order, slop 15 ms by default.
+
+Topics default to the benchmark-bag contract (``/camera/color/image_raw``,
+``/camera/depth/image_raw``, ``/camera/depth/camera_info``, ``/ground_truth/end_effectors``).
+When a bag lacks them, common driver layouts are recognised (RealSense ``realsense2_camera``
+aligned depth, Azure Kinect ``depth_to_rgb``) under any namespace, and the choice is stated in
+:attr:`TopicSelection.preset` / :meth:`TopicSelection.describe`.
+
+Ground truth is matched to a frame by exact equality of its ``header.stamp`` with the depth
+image's (the contract). A depth image that finds no colour partner within the slop is still
+yielded, with ``color=None`` (the tracker falls back to predicting without optical flow).
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+import numpy as np
+
+from endeff_ros.core.errors import InputError
+from endeff_ros.sync import ApproximateTimeSynchronizer
+
+from .errors import BagError
+
+if TYPE_CHECKING:
+    import argparse
+    from collections.abc import Iterable, Iterator
+
+    import numpy.typing as npt
+
+    from endeff_ros.core.types import RGBDFrame
+
+IMAGE = 'sensor_msgs/msg/Image'
+CAMERA_INFO = 'sensor_msgs/msg/CameraInfo'
+POINTCLOUD2 = 'sensor_msgs/msg/PointCloud2'
+
+DEFAULT_COLOR = '/camera/color/image_raw'
+DEFAULT_DEPTH = '/camera/depth/image_raw'
+DEFAULT_INFO = '/camera/depth/camera_info'
+DEFAULT_GT = '/ground_truth/end_effectors'
+
+#: (preset name, colour suffix, depth suffix, camera-info suffix), tried in this order under
+#: any namespace. The benchmark contract's own names (namespace ``/camera``) always come first.
+PRESETS: tuple[tuple[str, str, str, str], ...] = (
+    ('benchmark contract', '/color/image_raw', '/depth/image_raw', '/depth/camera_info'),
+    ('RealSense (realsense2_camera, aligned depth)', '/color/image_raw',
+     '/aligned_depth_to_color/image_raw', '/aligned_depth_to_color/camera_info'),
+    ('Azure Kinect (depth_to_rgb)', '/rgb/image_raw', '/depth_to_rgb/image_raw',
+     '/rgb/camera_info'),
+)
+
+BAG_SUFFIXES = ('.mcap', '.db3')
+
+
+@dataclass(frozen=True)
+class ReaderOptions:
+    """How to read a bag. ``None`` topics are taken from the contract or auto-detected."""
+
+    color_topic: str | None = None
+    depth_topic: str | None = None
+    info_topic: str | None = None
+    gt_topic: str | None = None
+    slop_s: float = 0.015
+    queue_size: int = 10
+    reorder_window_s: float = 1.0
+
+
+def add_reader_arguments(parser: argparse.ArgumentParser) -> None:
+    """Topic and synchronisation options shared by ``endeff eval`` and ``endeff process``."""
+    g = parser.add_argument_group('input topics (default: benchmark contract, else detected)')
+    g.add_argument('--color-topic', help=f'colour image topic (default {DEFAULT_COLOR})')
+    g.add_argument('--depth-topic', help=f'registered depth topic (default {DEFAULT_DEPTH})')
+    g.add_argument('--info-topic', help=f'depth camera info topic (default {DEFAULT_INFO})')
+    g.add_argument('--gt-topic', help=f'ground-truth PointCloud2 topic (default {DEFAULT_GT})')
+    g.add_argument('--slop', type=float, default=0.015, metavar='S',
+                   help='colour/depth synchronisation slop in seconds (default 0.015)')
+    g.add_argument('--queue-size', type=int, default=10, metavar='N',
+                   help='synchroniser queue size per input (default 10)')
+
+
+def options_from_args(args: argparse.Namespace) -> ReaderOptions:
+    """:class:`ReaderOptions` from the parsed :func:`add_reader_arguments` options."""
+    return ReaderOptions(color_topic=args.color_topic, depth_topic=args.depth_topic,
+                         info_topic=args.info_topic, gt_topic=args.gt_topic,
+                         slop_s=float(args.slop), queue_size=int(args.queue_size))
+
+
+@dataclass(frozen=True)
+class TopicSelection:
+    """The topics chosen for a bag and why (``preset``)."""
+
+    color: str
+    depth: str
+    info: str
+    gt: str | None
+    preset: str
+
+    def describe(self) -> str:
+        """One line naming the topics and how they were chosen."""
+        gt = self.gt or 'none'
+        return (f'{self.preset}: colour {self.color}, depth {self.depth}, '
+                f'camera info {self.info}, ground truth {gt}')
+
+
+@dataclass
+class ReadStats:
+    """Counters of one pass over a bag.
+
+    ``dropped`` counts messages per topic that were not used in a yielded frame: colour images
+    without a depth partner, depth images that came before any camera info or out of order.
+    ``colorless`` counts frames yielded with ``color=None`` (depth without a colour partner).
+    """
+
+    messages: dict[str, int] = field(default_factory=dict)
+    frames: int = 0
+    colorless: int = 0
+    dropped: dict[str, int] = field(default_factory=dict)
+    gt_messages: int = 0
+    gt_matched: int = 0
+
+    @property
+    def gt_unmatched(self) -> int:
+        """Ground-truth messages whose stamp equals no yielded depth frame's stamp."""
+        return self.gt_messages - self.gt_matched
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly form."""
+        return {'messages': dict(self.messages), 'frames': self.frames,
+                'colorless_frames': self.colorless, 'dropped': dict(self.dropped),
+                'gt_messages': self.gt_messages, 'gt_matched': self.gt_matched,
+                'gt_unmatched': self.gt_unmatched}
+
+
+class BagRecord(NamedTuple):
+    """One yielded frame: the frame, its ground truth (N, 3) or None, the depth's log time."""
+
+    frame: RGBDFrame
+    gt: npt.NDArray[np.float64] | None
+    log_time_ns: int
+
+
+def is_bag(path: Path) -> bool:
+    """A rosbag2 directory (``metadata.yaml``) or a single ``.mcap`` / ``.db3`` file."""
+    if path.is_dir():
+        return (path / 'metadata.yaml').is_file()
+    return path.suffix in BAG_SUFFIXES
+
+
+def find_bags(paths: Iterable[str | Path]) -> list[Path]:
+    """Expand arguments to bags: bags stay, other directories are searched recursively.
+
+    Raises :class:`BagError` for a path that does not exist or a directory without bags.
+    """
+    out: list[Path] = []
+    for arg in paths:
+        path = Path(arg)
+        if not path.exists():
+            raise BagError(path, 'no such file or directory')
+        if is_bag(path):
+            out.append(path)
+            continue
+        if not path.is_dir():
+            raise BagError(path, f'not a rosbag2 bag (expected a directory with metadata.yaml '
+                                 f'or a {" or ".join(BAG_SUFFIXES)} file)')
+        found = _search(path)
+        if not found:
+            raise BagError(path, 'directory contains no rosbag2 bags')
+        out.extend(found)
+    return out
+
+
+def _search(root: Path) -> list[Path]:
+    found: list[Path] = []
+    for child in sorted(root.iterdir()):
+        if child.is_dir():
+            found.extend([child] if is_bag(child) else _search(child))
+        elif child.suffix in BAG_SUFFIXES:
+            found.append(child)
+    return found
+
+
+def bag_name(path: Path) -> str:
+    """Sequence name of a bag: its directory name, or the file name without suffix."""
+    path = Path(path)
+    if path.is_dir():
+        return path.resolve().name
+    if (path.parent / 'metadata.yaml').is_file():
+        return path.parent.resolve().name
+    return path.stem
+
+
+def _typestore() -> Any:
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def select_topics(topics: dict[str, str | None], options: ReaderOptions,
+                  bag: object = '') -> TopicSelection:
+    """Choose colour, depth, camera info and ground-truth topics from ``topic -> msgtype``.
+
+    Explicit options win; otherwise the contract's names, else the first complete
+    :data:`PRESETS` layout under any namespace. Raises :class:`BagError` naming what is missing.
+    """
+    explicit = (options.color_topic, options.depth_topic, options.info_topic)
+    gt = options.gt_topic or DEFAULT_GT
+    if options.gt_topic is None and gt not in topics:
+        gt_topic: str | None = None
+    else:
+        gt_topic = gt
+    if all(explicit):
+        sel = TopicSelection(*explicit, gt_topic, 'given topics')  # type: ignore[arg-type]
+    elif any(explicit):
+        want = (options.color_topic or DEFAULT_COLOR, options.depth_topic or DEFAULT_DEPTH,
+                options.info_topic or DEFAULT_INFO)
+        sel = TopicSelection(*want, gt_topic, 'given topics (others: benchmark contract)')
+    elif all(t in topics for t in (DEFAULT_COLOR, DEFAULT_DEPTH, DEFAULT_INFO)):
+        sel = TopicSelection(DEFAULT_COLOR, DEFAULT_DEPTH, DEFAULT_INFO, gt_topic,
+                             'benchmark contract')
+    else:
+        sel = _detect(topics, gt_topic, bag)
+    _check_types(topics, sel, bag)
+    return sel
+
+
+def _detect(topics: dict[str, str | None], gt_topic: str | None, bag: object) -> TopicSelection:
+    for name, c_sfx, d_sfx, i_sfx in PRESETS:
+        prefixes = sorted(t[:-len(d_sfx)] for t in topics if t.endswith(d_sfx))
+        for prefix in prefixes:
+            color, depth, info = prefix + c_sfx, prefix + d_sfx, prefix + i_sfx
+            if color in topics and info in topics:
+                return TopicSelection(color, depth, info, gt_topic, f'detected {name} layout')
+    images = sorted(t for t, typ in topics.items() if typ in (IMAGE, CAMERA_INFO))
+    wanted = ', '.join(t for t in (DEFAULT_COLOR, DEFAULT_DEPTH, DEFAULT_INFO)
+                       if t not in topics)
+    problem = (f'missing topic(s) {wanted} and no RealSense or Azure Kinect layout found; '
+               f'image/camera-info topics in the bag: {", ".join(images) or "none"} '
+               f'(choose with --color-topic/--depth-topic/--info-topic)')
+    raise BagError(bag, problem)
+
+
+def _check_types(topics: dict[str, str | None], sel: TopicSelection, bag: object) -> None:
+    wants = [('colour', sel.color, IMAGE), ('depth', sel.depth, IMAGE),
+             ('camera info', sel.info, CAMERA_INFO)]
+    if sel.gt is not None:
+        wants.append(('ground truth', sel.gt, POINTCLOUD2))
+    for role, topic, typ in wants:
+        if topic not in topics:
+            raise BagError(bag, f'missing {role} topic {topic} ({sel.preset})')
+        have = topics[topic]
+        if have != typ:
+            hint = ' (compressed images are not supported)' if have and 'Compressed' in have \
+                else ''
+            raise BagError(bag, f'{role} topic {topic} has type {have}, expected {typ}{hint}')
+
+
+class BagReader:
+    """One bag, opened for reading; use as a context manager.
+
+    >>> with BagReader(path) as bag:            # doctest: +SKIP
+    ...     print(bag.selection.describe())
+    ...     for frame, gt in bag.frames():
+    ...         ...
+    """
+
+    def __init__(self, path: str | Path, options: ReaderOptions | None = None) -> None:
+        self.path = Path(path)
+        self.name = bag_name(self.path)
+        self.options = options or ReaderOptions()
+        self.stats = ReadStats()
+        self._reader: Any = None
+        self.selection: TopicSelection | None = None
+        self.topic_types: dict[str, str | None] = {}
+        self.topic_counts: dict[str, int] = {}
+
+    # -- opening -------------------------------------------------------------------------------
+
+    def __enter__(self) -> BagReader:
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def open(self) -> None:
+        """Open the bag, choose topics and check their types (:class:`BagError` if unusable)."""
+        from rosbags.highlevel import AnyReader
+
+        if not self.path.exists():
+            raise BagError(self.path, 'no such file or directory')
+        if not is_bag(self.path):
+            raise BagError(self.path, 'not a rosbag2 bag (need a directory with metadata.yaml '
+                                      'or a .mcap / .db3 file)')
+        try:
+            reader = AnyReader([self.path], default_typestore=_typestore())
+            reader.open()
+        except Exception as err:  # rosbags, sqlite3, mcap, yaml, zstd errors alike
+            raise BagError(self.path, f'cannot open bag: {_why(err)}') from err
+        self._reader = reader
+        try:
+            self.topic_types = {name: info.msgtype for name, info in reader.topics.items()}
+            self.topic_counts = {name: int(info.msgcount) for name, info in
+                                 reader.topics.items()}
+            self.selection = select_topics(self.topic_types, self.options, self.path)
+            if self.topic_counts.get(self.selection.info, 1) == 0:
+                raise BagError(self.path, f'camera info topic {self.selection.info} has no '
+                                          f'messages (no intrinsics)')
+            if self.topic_counts.get(self.selection.depth, 1) == 0:
+                raise BagError(self.path, f'depth topic {self.selection.depth} has no messages')
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        """Close the underlying reader (idempotent)."""
+        if self._reader is not None:
+            reader, self._reader = self._reader, None
+            try:
+                reader.close()
+            except Exception:  # noqa: S110 - closing a broken bag must not mask the real error
+                pass
+
+    @property
+    def reader(self) -> Any:
+        """The open ``rosbags.highlevel.AnyReader``."""
+        if self._reader is None:
+            msg = f'{self.path}: bag is not open'
+            raise RuntimeError(msg)
+        return self._reader
+
+    @property
+    def depth_count(self) -> int:
+        """Depth messages in the bag (an upper bound on yielded frames)."""
+        assert self.selection is not None
+        return self.topic_counts.get(self.selection.depth, 0)
+
+    # -- reading -------------------------------------------------------------------------------
+
+    def frames(self) -> Iterator[tuple[RGBDFrame, npt.NDArray[np.float64] | None]]:
+        """Yield ``(frame, gt_positions or None)`` per synchronised frame, in stamp order."""
+        for rec in self.records():
+            yield rec.frame, rec.gt
+
+    def records(self) -> Iterator[BagRecord]:
+        """Yield a :class:`BagRecord` per frame; raises :class:`BagError` on bad data."""
+        from endeff_ros.ros import convert
+
+        sel = self.selection
+        if sel is None:
+            self.open()
+            sel = self.selection
+        assert sel is not None
+        self.stats = stats = ReadStats()
+        gt = self._read_gt(sel) if sel.gt else {}
+        stats.gt_messages = len(gt)
+        conns = [c for c in self.reader.connections if c.topic in (sel.color, sel.depth,
+                                                                     sel.info)]
+        index = {sel.color: 0, sel.depth: 1, sel.info: 2}
+        # Same header stamp: camera info first, so a frame uses the info stamped with it.
+        priority = {sel.info: 0, sel.color: 1, sel.depth: 2}
+        for topic in index:
+            stats.messages[topic] = 0
+            stats.dropped[topic] = 0
+        sync = ApproximateTimeSynchronizer(3, self.options.queue_size,
+                                           round(self.options.slop_s * 1e9), latched=(2,))
+        pending: list[_Entry] = []  # depth entries fed but not yet emitted or yielded
+        last_info: list[Any] = [None]
+        last_yielded = [-1]
+
+        def build(color: _Entry | None, depth: _Entry, info: Any) -> BagRecord | None:
+            if depth.stamp <= last_yielded[0] or info is None:
+                stats.dropped[sel.depth] += 1
+                return None
+            try:
+                frame = convert.frame_from_messages(color.msg if color else None, depth.msg,
+                                                    info)
+            except InputError as err:
+                problem = f'frame at stamp {depth.stamp} ns (depth {sel.depth}): {err}'
+                raise BagError(self.path, problem) from err
+            positions = gt.get(depth.stamp)
+            if positions is not None:
+                stats.gt_matched += 1
+            stats.frames += 1
+            stats.colorless += color is None
+            last_yielded[0] = depth.stamp
+            return BagRecord(frame, positions, depth.log_time)
+
+        for entry in self._ordered(conns, priority):
+            stats.messages[entry.topic] += 1
+            i = index[entry.topic]
+            if i == 2:
+                last_info[0] = entry.msg
+            elif i == 1:
+                pending.append(entry)
+            for color, depth, info in sync.add(i, entry.stamp, entry if i < 2 else entry.msg):
+                newest = max(color.stamp, depth.stamp)
+                dead = [p for p in pending if p.stamp <= newest and p is not depth]
+                pending = [p for p in pending if p.stamp > newest]
+                out = [(p.stamp, 0, None, p, last_info[0]) for p in dead]
+                out.append((depth.stamp, 1, color, depth, info))
+                for _, _, c, d, inf in sorted(out, key=lambda item: (item[0], item[1])):
+                    rec = build(c, d, inf)
+                    if rec is not None:
+                        yield rec
+        for p in pending:
+            rec = build(None, p, last_info[0])
+            if rec is not None:
+                yield rec
+        if stats.messages[sel.info] == 0:
+            raise BagError(self.path, f'no camera info on {sel.info} (no intrinsics)')
+        # Colour messages the synchroniser dropped; depth drops are yielded colour-less.
+        stats.dropped[sel.color] += sync.stats.dropped[0]
+
+    def _read_gt(self, sel: TopicSelection) -> dict[int, npt.NDArray[np.float64]]:
+        from endeff_ros.ros import convert
+
+        out: dict[int, npt.NDArray[np.float64]] = {}
+        conns = [c for c in self.reader.connections if c.topic == sel.gt]
+        for conn, _, raw in self._messages(conns):
+            msg = self._deserialize(raw, conn)
+            try:
+                points = convert.cloud_to_array(msg)
+                names = points.dtype.names or ()
+                if not {'x', 'y', 'z'} <= set(names):
+                    missing = sorted({'x', 'y', 'z'} - set(names))
+                    msg_ = f'has no field(s) {", ".join(missing)}'
+                    raise InputError(msg_)
+                pos = convert.xyz(points)
+            except InputError as err:
+                stamp = convert.stamp_to_ns(msg.header.stamp)
+                raise BagError(self.path, f'ground truth {sel.gt} at stamp {stamp} ns: '
+                                          f'{err}') from err
+            out[convert.stamp_to_ns(msg.header.stamp)] = pos[np.all(np.isfinite(pos), axis=1)]
+        return out
+
+    def _messages(self, conns: list[Any]) -> Iterator[tuple[Any, int, bytes]]:
+        """Raw messages of ``conns``; storage-level failures become :class:`BagError`."""
+        if not conns:
+            return
+        it = self.reader.messages(connections=conns)
+        while True:
+            try:
+                item = next(it)
+            except StopIteration:
+                return
+            except Exception as err:
+                raise BagError(self.path, f'cannot read messages (truncated or corrupt '
+                                          f'file?): {_why(err)}') from err
+            yield item
+
+    def _deserialize(self, raw: bytes, conn: Any) -> Any:
+        try:
+            return self.reader.deserialize(raw, conn.msgtype)
+        except Exception as err:
+            raise BagError(self.path, f'cannot decode a {conn.msgtype} message on {conn.topic} '
+                                      f'(corrupt data?): {_why(err)}') from err
+
+    def _ordered(self, conns: list[Any], priority: dict[str, int]) -> Iterator[_Entry]:
+        """Messages of ``conns`` deserialised and re-ordered by header stamp.
+
+        Recording order (log time) may differ from ``header.stamp``; a heap holds messages
+        until a message ``reorder_window_s`` newer (by header stamp) has been read.
+        """
+        from endeff_ros.ros import convert
+
+        window = round(self.options.reorder_window_s * 1e9)
+        heap: list[tuple[int, int, int, _Entry]] = []
+        newest = None
+        counter = itertools.count()
+        for conn, log_time, raw in self._messages(conns):
+            msg = self._deserialize(raw, conn)
+            stamp = convert.stamp_to_ns(msg.header.stamp)
+            entry = _Entry(conn.topic, stamp, log_time, msg)
+            heapq.heappush(heap, (stamp, priority[conn.topic], next(counter), entry))
+            newest = stamp if newest is None else max(newest, stamp)
+            while heap and newest - heap[0][0] > window:
+                yield heapq.heappop(heap)[3]
+        while heap:
+            yield heapq.heappop(heap)[3]
+
+
+@dataclass(frozen=True)
+class _Entry:
+    topic: str
+    stamp: int
+    log_time: int
+    msg: Any
+
+
+def _why(err: BaseException) -> str:
+    text = str(err).strip() or repr(err)
+    return f'{type(err).__name__}: {text}'
+
+
+def read_frames(path: str | Path, options: ReaderOptions | None = None
+                ) -> Iterator[tuple[RGBDFrame, npt.NDArray[np.float64] | None]]:
+    """Convenience: open ``path`` and yield ``(frame, gt or None)`` for every frame."""
+    with BagReader(path, options) as bag:
+        yield from bag.frames()
