@@ -252,8 +252,10 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
     pixels whose flow is finite and whose previous depth is within ``depth_tolerance`` of the
     point's z (so a hand in front of the torso takes the hand's motion, not the torso's). The
     neighbourhood's depth change Δz is the median of ``cur_depth(p + flow(p)) - prev_depth(p)``
-    over those pixels. At the moved pixel the new depth is the median of the current depths
-    within ``depth_tolerance`` of z + Δz; the point is back-projected with it.
+    over those pixels, ignoring jumps above ``2 * depth_tolerance`` (occlusions). At the moved
+    pixel the new depth is the median of the current depths within ``depth_tolerance`` of
+    z + Δz; the point is back-projected with it. A point that becomes occluded (e.g. the torso
+    behind a moving hand) thus keeps its own depth instead of jumping onto the occluder.
 
     Fallbacks (``reliable`` False): too few valid pixels -> the larger window; still none ->
     zero motion (flow) or z + Δz (depth). Points that do not project into frame t (outside the
@@ -306,7 +308,10 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
         d1 = _gather(cur_depth, np.where(ok, np.rint(rows + f[:, :, 1]), -1.0),
                      np.where(ok, np.rint(cols + f[:, :, 0]), -1.0))
         with np.errstate(invalid='ignore'):
-            dz_ok = ok & np.isfinite(d1) & (d1 > 0)
+            # A jump of more than 2 tolerances in one frame is an occlusion (the pixel now
+            # sees another surface), not motion of this one.
+            dz_ok = (ok & np.isfinite(d1) & (d1 > 0)
+                     & (np.abs(d1 - d0) <= 2.0 * depth_tolerance))
         dz, _ = _masked_median(d1 - d0, dz_ok)
         return du, dv, dz, count >= min_valid[win]
 
