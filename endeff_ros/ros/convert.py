@@ -325,7 +325,8 @@ def result_to_markers(header: Any, result: TrackerResult, lifetime_s: float = 0.
     Each track gets a SPHERE (namespace ``end_effectors``, marker id = track id), a
     TEXT_VIEW_FACING label ``id (state)`` and a LINE_STRIP through ``track.path`` (sub-band
     centroids to the root); each entity gets a root sphere. Every marker carries ``header`` and
-    a ``lifetime_s`` lifetime so that stale markers vanish when the node stops.
+    a ``lifetime_s`` lifetime so that stale markers vanish when the node stops. ``result`` needs
+    ``tracks`` and ``estimate`` (which may be None: no root markers).
     """
     from visualization_msgs.msg import Marker, MarkerArray
 
@@ -370,7 +371,8 @@ def result_to_markers(header: Any, result: TrackerResult, lifetime_s: float = 0.
             line.color = _color(rgb, 0.8)
             line.points = [_point(p) for p in path]
             out.markers.append(line)
-    for e in result.estimate.entities:
+    estimate = getattr(result, 'estimate', None)
+    for e in (estimate.entities if estimate is not None else []):
         root = new(NS_ROOT, int(e.entity), Marker.SPHERE)
         root.pose.position = _point(e.root)
         root.scale.x = root.scale.y = root.scale.z = 0.1

@@ -1,0 +1,327 @@
+"""``endeff_node``: RGB-D images in, tracked end-effectors out. Thin wiring around the core.
+
+Subscribes (relative, remappable names) to ``color/image_raw``, ``depth/image_raw`` and
+``depth/camera_info``; publishes ``end_effectors`` (PointCloud2), ``end_effectors/markers``
+(MarkerArray), optionally ``debug/bands`` and ``debug/image``, and ``/diagnostics``.
+
+Latency never grows: subscription callbacks only synchronise and put the newest set into a
+one-item slot; a worker thread takes the newest set, runs the tracker and publishes. Sets the
+worker was too slow for are skipped and counted.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Callable
+from functools import partial
+from types import SimpleNamespace
+from typing import Any
+
+import rclpy
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
+from rclpy.clock import JumpThreshold
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from visualization_msgs.msg import MarkerArray
+
+from endeff_ros.core.errors import InputError, ParameterError
+from endeff_ros.core.params import NODE_NAME, EndeffParams, describe
+from endeff_ros.core.tracker import Tracker
+from endeff_ros.ros import convert
+from endeff_ros.ros.processing import (
+    NODE_PARAMS,
+    LatestSlot,
+    NodeStats,
+    describe_text,
+    flatten,
+    updated_params,
+    validate_node_changes,
+)
+from endeff_ros.sync import ApproximateTimeSynchronizer
+
+try:
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+except ImportError:  # pragma: no cover - diagnostic_msgs is part of common_interfaces
+    DiagnosticArray = None
+    from std_msgs.msg import String
+
+_TYPES = {'float': ParameterType.PARAMETER_DOUBLE, 'int': ParameterType.PARAMETER_INTEGER,
+          'bool': ParameterType.PARAMETER_BOOL, 'str': ParameterType.PARAMETER_STRING}
+_TOPICS = {'color': 'color/image_raw', 'depth': 'depth/image_raw',
+           'camera_info': 'depth/camera_info'}
+
+
+def descriptor(row: dict[str, Any]) -> ParameterDescriptor:
+    """ParameterDescriptor of one parameter-table row (type, description, range, read-only)."""
+    d = ParameterDescriptor(name=row['name'], type=_TYPES[row['type']],
+                            description=describe_text(row), read_only=not row['runtime'])
+    if row['lo'] is not None and row['hi'] is not None:
+        if row['type'] == 'float':
+            d.floating_point_range = [FloatingPointRange(
+                from_value=float(row['lo']), to_value=float(row['hi']), step=0.0)]
+        elif row['type'] == 'int':
+            d.integer_range = [IntegerRange(from_value=int(row['lo']), to_value=int(row['hi']),
+                                            step=1)]
+    return d
+
+
+def _qos(reliability: str, depth: int) -> QoSProfile:
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      durability=DurabilityPolicy.VOLATILE,
+                      reliability=ReliabilityPolicy.RELIABLE if reliability == 'reliable'
+                      else ReliabilityPolicy.BEST_EFFORT)
+
+
+class EndeffNode(Node):
+    """The end-effector node. ``tracker_factory(params)`` builds the tracker (tests inject one)."""
+
+    def __init__(self, *, tracker_factory: Callable[[EndeffParams], Any] = Tracker,
+                 node_name: str = NODE_NAME, **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        for row in [*describe(), *NODE_PARAMS]:
+            self.declare_parameter(row['name'], row['default'], descriptor(row))
+        self.params = EndeffParams.from_dict(
+            {row['name']: self.get_parameter(row['name']).value for row in describe()})
+        validate_node_changes({r['name']: self._p(r['name']) for r in NODE_PARAMS})
+        self.tracker = tracker_factory(self.params)
+        self.stats = NodeStats()
+        self._lock = threading.Lock()
+        self._slot: LatestSlot[tuple[dict[str, Any], float]] = LatestSlot()
+        self._inputs = ['color', 'depth', 'camera_info'] if self._p('use_color') else [
+            'depth', 'camera_info']
+        self._last_info: Any = None
+        self._first_unpaired_depth: float | None = None
+        self._newest_ns: int | None = None
+        self._reset_pending = False
+        self._params_pending: EndeffParams | None = None
+        self._dropped_before = {k: 0 for k in self._inputs}
+        self._sync = self._make_sync(self._p('sync_queue_size'), self._p('sync_slop'))
+        qos_out = _qos(self._p('output_reliability'), 5)
+        self.pub_cloud = self.create_publisher(PointCloud2, 'end_effectors', qos_out)
+        self.pub_markers = self.create_publisher(MarkerArray, 'end_effectors/markers', qos_out)
+        self.pub_bands = self.create_publisher(PointCloud2, 'debug/bands', qos_out)
+        self.pub_image = self.create_publisher(Image, 'debug/image', qos_out)
+        if DiagnosticArray is not None:
+            self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        else:  # pragma: no cover
+            self.pub_diag = self.create_publisher(String, '~/statistics', 10)
+        qos_in = _qos(self._p('input_reliability'), self._p('input_queue_depth'))
+        # Camera info first: when several inputs are ready, the executor serves it first.
+        self._subs = [self.create_subscription(CameraInfo if kind == 'camera_info' else Image,
+                                               _TOPICS[kind], partial(self._on_input, kind),
+                                               qos_in) for kind in reversed(self._inputs)]
+        self._jump = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1),
+                          on_clock_change=False), post_callback=self._on_clock_jump)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._worker = threading.Thread(target=self._run, name='endeff_worker', daemon=True)
+        self._worker.start()
+
+    # ---------------------------------------------------------------- parameters and inputs
+    def _p(self, name: str) -> Any:
+        return self.get_parameter(name).value
+
+    def _make_sync(self, queue_size: int, slop_s: float) -> ApproximateTimeSynchronizer:
+        sync = ApproximateTimeSynchronizer(len(self._inputs), int(queue_size),
+                                           round(float(slop_s) * 1e9),
+                                           latched=(self._inputs.index('camera_info'),))
+        if self._last_info is not None:
+            sync.add(self._inputs.index('camera_info'), 0, self._last_info)
+        return sync
+
+    def _replace_sync(self, queue_size: int, slop_s: float) -> None:
+        """New synchroniser (caller holds the lock); keeps the drop counts and camera info."""
+        for i, kind in enumerate(self._inputs):
+            self._dropped_before[kind] += self._sync.stats.dropped[i]
+        self._sync = self._make_sync(queue_size, slop_s)
+
+    def dropped(self) -> dict[str, int]:
+        """Messages the synchroniser dropped unpaired, per input."""
+        return {k: self._dropped_before[k] + self._sync.stats.dropped[i]
+                for i, k in enumerate(self._inputs)}
+
+    def _on_input(self, kind: str, msg: Any) -> None:
+        receipt = time.monotonic()
+        stamp = convert.stamp_to_ns(msg.header.stamp)
+        with self._lock:
+            self.stats.received[kind] += 1
+            if kind == 'camera_info':
+                self._last_info = msg
+                self._first_unpaired_depth = None
+            elif self._newest_ns is not None and stamp < self._newest_ns - round(
+                    self._p('time_jump_threshold') * 1e9):
+                self.get_logger().info(f'input stamps jumped back by '
+                                       f'{(self._newest_ns - stamp) / 1e9:.3f} s: resetting')
+                self._request_reset()
+                self._newest_ns = stamp
+            else:
+                self._newest_ns = max(stamp, self._newest_ns or stamp)
+            if kind == 'depth' and self._first_unpaired_depth is None:
+                self._first_unpaired_depth = receipt
+            sets = self._sync.add(self._inputs.index(kind), stamp, msg)
+        for found in sets:
+            self._slot.put((dict(zip(self._inputs, found)), receipt))
+
+    def _request_reset(self) -> None:
+        """Forget the tracks and the synchroniser state (caller holds the lock)."""
+        self._reset_pending = True
+        self._replace_sync(self._p('sync_queue_size'), self._p('sync_slop'))
+        self._slot.clear()
+
+    def _on_clock_jump(self, jump: Any) -> None:
+        if jump.delta.nanoseconds < 0:
+            with self._lock:
+                self._request_reset()
+
+    def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:
+        changes = {p.name: p.value for p in params}
+        try:
+            validate_node_changes(changes)
+            new = updated_params(self.params, changes)
+            queue = changes.get('sync_queue_size', self._p('sync_queue_size'))
+            slop = changes.get('sync_slop', self._p('sync_slop'))
+        except (ParameterError, ValueError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        with self._lock:
+            if new is not self.params:
+                self.params = self._params_pending = new
+            if 'sync_queue_size' in changes or 'sync_slop' in changes:
+                self._replace_sync(queue, slop)
+        return SetParametersResult(successful=True)
+
+    # ---------------------------------------------------------------- processing
+    def _run(self) -> None:
+        next_diag = next_log = time.monotonic()
+        while not self._slot.closed:
+            item = self._slot.take(timeout=0.1)
+            try:
+                if item is not None:
+                    self._process(*item)
+                now = time.monotonic()
+                self._check_camera_info(now)
+                if now >= next_diag:
+                    next_diag = now + self._p('diagnostics_period')
+                    self._publish_diagnostics(log=now >= next_log)
+                    if now >= next_log:
+                        next_log = now + self._p('log_period')
+            except Exception as exc:  # noqa: BLE001 - the worker must survive anything
+                if not rclpy.ok(context=self.context):
+                    return
+                self.stats.errors += 1
+                self.get_logger().error(f'processing failed: {exc!r}',
+                                        throttle_duration_sec=5)
+
+    def _check_camera_info(self, now: float) -> None:
+        """Warn when depth images arrive but camera info has not for half a second."""
+        first = self._first_unpaired_depth
+        if self._last_info is None and first is not None and now - first > 0.5:
+            topic = self.resolve_topic_name(_TOPICS['camera_info'])
+            text = f'no camera info received on {topic}: depth images wait for it'
+            self.stats.warn('missing_camera_info', text)
+            self.get_logger().warning(text, throttle_duration_sec=5)
+
+    def _process(self, msgs: dict[str, Any], receipt: float) -> None:
+        with self._lock:
+            if self._params_pending is not None:
+                self.tracker.params, self._params_pending = self._params_pending, None
+            if self._reset_pending:
+                self.tracker.reset()
+                self._reset_pending = False
+                self.stats.resets += 1
+        depth = msgs['depth']
+        header = depth.header
+        t0 = time.perf_counter()
+        try:
+            frame = convert.frame_from_messages(msgs.get('color'), depth, msgs['camera_info'])
+        except InputError as exc:
+            self.stats.bad_input += 1
+            text = f'skipping input frame: {exc}'
+            self.stats.warn('bad_input', text)
+            self.get_logger().warning(text, throttle_duration_sec=5)
+            return
+        try:
+            result = self.tracker.update(frame)
+        except InputError as exc:
+            text = f'no end-effectors in frame (publishing an empty cloud): {exc}'
+            self.stats.warn('empty_frame', text)
+            self.get_logger().warning(text, throttle_duration_sec=5)
+            result = SimpleNamespace(tracks=[], estimate=None)
+        self.pub_cloud.publish(convert.tracks_to_cloud(header, result.tracks))
+        self.pub_markers.publish(
+            convert.result_to_markers(header, result, self._p('marker_lifetime')))
+        if result.estimate is not None and self._p('publish_debug_bands'):
+            self.pub_bands.publish(convert.bands_to_cloud(header, result.estimate))
+        if self._p('publish_debug_image'):
+            base = frame.color if frame.color is not None else convert.depth_to_rgb(frame.depth)
+            image = convert.draw_tracks(base, frame.intrinsics, result.tracks)
+            self.pub_image.publish(convert.array_to_image_msg(header, image))
+        self.stats.processed += 1
+        self.stats.published_empty += not result.tracks
+        self.stats.processing_ms.add((time.perf_counter() - t0) * 1e3)
+        self.stats.age_ms.add((time.monotonic() - receipt) * 1e3)
+        now_ns = self.get_clock().now().nanoseconds
+        self.stats.latency_ms.add((now_ns - frame.stamp_ns) / 1e6)
+
+    # ---------------------------------------------------------------- reporting
+    def snapshot(self) -> dict[str, Any]:
+        """Counters and timing summaries (what /diagnostics carries)."""
+        with self._lock:
+            return self.stats.as_dict(dropped=self.dropped(), skipped=self._slot.skipped,
+                                      sets=self._slot.put_count)
+
+    def _publish_diagnostics(self, *, log: bool) -> None:
+        snap = self.snapshot()
+        proc = snap['processing_ms'].get('p95', float('nan'))
+        text = (f"{snap['processed']} frames processed, {snap['skipped']} skipped, "
+                f"{sum(snap['dropped_unpaired'].values())} dropped unpaired, "
+                f"{snap['bad_input']} bad inputs, p95 processing {proc:.1f} ms, "
+                f"p95 latency {snap['latency_ms'].get('p95', float('nan')):.1f} ms")
+        if log:
+            self.get_logger().info(text)
+        if DiagnosticArray is None:  # pragma: no cover
+            self.pub_diag.publish(String(data=json.dumps(snap)))
+            return
+        status = DiagnosticStatus(name=f'{self.get_name()}: processing',
+                                  hardware_id=self.get_fully_qualified_name(), message=text)
+        status.level = DiagnosticStatus.WARN if (
+            snap['bad_input'] or snap['errors']) else DiagnosticStatus.OK
+        status.values = [KeyValue(key=k, value=v) for k, v in flatten(snap)]
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(array)
+
+    def destroy_node(self) -> None:
+        self._slot.close()
+        if self._worker.is_alive() and self._worker is not threading.current_thread():
+            self._worker.join(timeout=5.0)
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run endeff_ros endeff_node``."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = EndeffNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,279 @@
+"""In-process tests of endeff_node with an injected fake tracker (plumbing, bad input, params)."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from ros_helpers import image_msg, info_msg, spin_until
+
+from endeff_ros.core.errors import InputError
+from endeff_ros.core.params import EndeffParams
+from endeff_ros.core.single_frame import EntityEstimate, FrameEstimate
+from endeff_ros.core.tracker import TrackerResult
+from endeff_ros.core.types import RGBDFrame, Track
+from endeff_ros.ros import convert
+from endeff_ros.ros.processing import LatestSlot
+
+rclpy = pytest.importorskip('rclpy')
+
+pytestmark = pytest.mark.ros
+
+W, H = 32, 24
+FRAME_ID = 'camera_depth_optical_frame'
+_ns = itertools.count()
+
+
+class FakeTracker:
+    """Finds one 'end-effector' at the nearest valid depth pixel; nothing beyond 3 m."""
+
+    instances: list[FakeTracker] = []
+
+    def __init__(self, params: EndeffParams) -> None:
+        self.params = params
+        self.frames: list[RGBDFrame] = []
+        self.params_seen: list[EndeffParams] = []
+        self.resets = 0
+        FakeTracker.instances.append(self)
+
+    def reset(self) -> None:
+        self.resets += 1
+
+    def update(self, frame: RGBDFrame) -> TrackerResult:
+        self.frames.append(frame)
+        self.params_seen.append(self.params)
+        if not np.isfinite(frame.depth).any():
+            msg = 'depth image has no valid reading'
+            raise InputError(msg)
+        v, u = np.unravel_index(np.nanargmin(frame.depth), frame.depth.shape)
+        z = float(frame.depth[v, u])
+        k = frame.intrinsics
+        p = np.array([(u - k.cx) * z / k.fx, (v - k.cy) * z / k.fy, z])
+        tracks = [] if z > 3.0 else [
+            Track(id=4, entity=0, position=p, geodesic=0.8, confidence=0.9, state=0, age=1,
+                  path=np.stack([p, p + [0, 0.1, 0], p + [0, 0.3, 0]]))]
+        root = p + [0, 0.3, 0]
+        estimate = FrameEstimate(points=p[None], band=np.zeros(1, int), subband=np.zeros(1, int),
+                                 entity=np.zeros(1, int), unreachable=0, entities=[
+                                     EntityEstimate(0, root, [], None, np.zeros(1, int))])
+        return TrackerResult(frame.stamp_ns, frame.frame_id, tracks, estimate)
+
+
+@pytest.fixture(scope='session')
+def ros_context():
+    rclpy.init()
+    yield
+    rclpy.shutdown()
+
+
+class Harness:
+    """The node under test plus a tester node that feeds inputs and collects outputs."""
+
+    def __init__(self, overrides: dict | None = None) -> None:
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.parameter import Parameter
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+        from visualization_msgs.msg import MarkerArray
+
+        from endeff_ros.ros.node import EndeffNode
+
+        overrides = overrides or {}
+        self.ns = f'/t{next(_ns)}'
+        params = [Parameter(k, value=v) for k, v in overrides.items()]
+        self.node = EndeffNode(tracker_factory=FakeTracker, namespace=self.ns,
+                               parameter_overrides=params)
+        self.tracker: FakeTracker = self.node.tracker
+        self.tester = rclpy.create_node('tester', namespace=self.ns)
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.pub = {'color': self.tester.create_publisher(Image, 'color/image_raw', qos),
+                    'depth': self.tester.create_publisher(Image, 'depth/image_raw', qos),
+                    'info': self.tester.create_publisher(CameraInfo, 'depth/camera_info', qos)}
+        self.clouds: list = []
+        self.markers: list = []
+        self.tester.create_subscription(PointCloud2, 'end_effectors', self.clouds.append, qos)
+        self.tester.create_subscription(MarkerArray, 'end_effectors/markers',
+                                        self.markers.append, qos)
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+        self.executor.add_node(self.tester)
+        inputs = [p for k, p in self.pub.items() if k != 'color' or overrides.get(
+            'use_color', True)]
+        assert spin_until(self.executor, lambda: all(
+            p.get_subscription_count() > 0 for p in inputs) and
+            self.node.pub_cloud.get_subscription_count() > 0 and
+            self.node.pub_markers.get_subscription_count() > 0), 'discovery failed'
+
+    def send(self, stamp_ns: int, *, depth_m: float = 1.5, color: bool = True, info=True,
+             depth_msg=None, color_msg=None, info_f: float = 500.0) -> None:
+        if info:  # camera info first, and received, so the set pairs with this one
+            count = self.node.stats.received['camera_info']
+            self.pub['info'].publish(info_msg(stamp_ns, FRAME_ID, W, H, info_f))
+            assert spin_until(self.executor,
+                              lambda: self.node.stats.received['camera_info'] > count)
+        if color:
+            self.pub['color'].publish(color_msg or image_msg(
+                np.full((H, W, 3), 90, np.uint8), 'rgb8', stamp_ns + 3_000_000, 'color_frame'))
+        if depth_msg is None:
+            mm = np.full((H, W), 3800, np.uint16)
+            mm[5, 7] = round(depth_m * 1000)
+            depth_msg = image_msg(mm, '16UC1', stamp_ns, FRAME_ID)
+        self.pub['depth'].publish(depth_msg)
+
+    def wait_clouds(self, n: int) -> bool:
+        return spin_until(self.executor, lambda: len(self.clouds) >= n and
+                          len(self.markers) >= n)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.tester.destroy_node()
+
+
+@pytest.fixture
+def harness(ros_context):
+    made: list[Harness] = []
+
+    def make(**overrides) -> Harness:
+        made.append(Harness(overrides))
+        return made[-1]
+
+    yield make
+    for h in made:
+        h.close()
+
+
+def test_stamp_frame_and_markers_propagate(harness):
+    h = harness()
+    h.send(1_000_000_000_123)
+    assert h.wait_clouds(1)
+    cloud = h.clouds[0]
+    assert convert.stamp_to_ns(cloud.header.stamp) == 1_000_000_000_123
+    assert cloud.header.frame_id == FRAME_ID
+    points = convert.cloud_to_array(cloud)
+    assert list(points['id']) == [4]
+    np.testing.assert_allclose(points['z'], [1.5], rtol=1e-6)
+    frame = h.tracker.frames[0]
+    assert frame.color is not None and frame.color.shape == (H, W, 3)
+    spheres = [m for m in h.markers[0].markers if m.ns == convert.NS_EFFECTOR]
+    assert [m.id for m in spheres] == list(points['id'])
+    np.testing.assert_allclose([[m.pose.position.x, m.pose.position.y, m.pose.position.z]
+                                for m in spheres], convert.xyz(points), atol=1e-6)
+    assert all(m.header.frame_id == FRAME_ID and convert.stamp_to_ns(m.header.stamp) ==
+               1_000_000_000_123 for m in h.markers[0].markers)
+    assert h.markers[0].markers[0].action == 3  # DELETEALL first
+
+
+def test_empty_cloud_when_nothing_found(harness):
+    h = harness()
+    h.send(2_000_000_000, depth_m=3.5)
+    assert h.wait_clouds(1)
+    assert h.clouds[0].width == 0 and convert.stamp_to_ns(h.clouds[0].header.stamp) == 2e9
+    assert [m.ns for m in h.markers[0].markers if m.action == 0] == [convert.NS_ROOT]
+
+
+def test_depth_only_mode(harness):
+    h = harness(use_color=False)
+    h.send(3_000_000_000, color=False)
+    assert h.wait_clouds(1)
+    assert h.tracker.frames[0].color is None
+
+
+def _bad(kind: str) -> dict:
+    if kind == 'zero_k':
+        return {'info_f': 0.0}
+    if kind == 'encoding':
+        return {'depth_msg': image_msg(np.zeros((H, W), np.uint8), 'mono8', 0, FRAME_ID)}
+    if kind == 'size_mismatch':
+        return {'color_msg': image_msg(np.zeros((H * 2, W * 2, 3), np.uint8), 'rgb8', 0, 'c')}
+    return {'depth_msg': image_msg(np.zeros((H, W), np.uint16), '16UC1', 0, FRAME_ID)}
+
+
+@pytest.mark.parametrize('kind,text,publishes', [
+    ('zero_k', 'calibrated', False), ('encoding', "'mono8'", False),
+    ('size_mismatch', 'colour image', False), ('all_nan', 'no valid reading', True)])
+def test_bad_input_warns_and_keeps_running(harness, kind, text, publishes):
+    h = harness()
+    stamp = 5_000_000_000
+    bad = _bad(kind)
+    for key in ('depth_msg', 'color_msg'):
+        if key in bad:
+            bad[key].header.stamp.sec = 5
+            if key == 'color_msg':
+                bad[key].header.stamp.nanosec = 3_000_000
+    h.send(stamp, **bad)
+    assert spin_until(h.executor, lambda: h.node.stats.last_warning != '')
+    assert text in h.node.stats.last_warning
+    if publishes:  # empty foreground: an empty cloud for that stamp
+        assert h.wait_clouds(1) and h.clouds[0].width == 0
+    else:  # undecodable input: nothing published, but counted
+        assert h.node.stats.bad_input == 1
+    h.send(stamp + 100_000_000)
+    assert spin_until(h.executor, lambda: any(c.width == 1 for c in h.clouds))
+    assert convert.stamp_to_ns(h.clouds[-1].header.stamp) == stamp + 100_000_000
+
+
+def test_missing_camera_info_warns_then_recovers(harness):
+    h = harness()
+    h.send(7_000_000_000, info=False)
+    assert spin_until(h.executor, lambda: 'camera info' in h.node.stats.last_warning)
+    assert h.node.stats.received['depth'] == 1
+    assert h.node.stats.warnings['missing_camera_info'] >= 1 and not h.clouds
+    h.send(7_100_000_000)
+    assert h.wait_clouds(1)
+
+
+def test_runtime_parameters(harness):
+    from rclpy.parameter import Parameter
+
+    h = harness(band_delta=0.09, sync_slop=0.01)
+    assert h.tracker.params.band_delta == 0.09
+    desc = h.node.describe_parameter('band_delta')
+    assert 'δ_L' in desc.description and desc.floating_point_range[0].to_value == 1.0
+    assert h.node.describe_parameter('flow_method').read_only
+    ok = h.node.set_parameters([Parameter('band_delta', value=0.12)])[0]
+    assert ok.successful
+    h.send(8_000_000_000)
+    assert h.wait_clouds(1)
+    assert h.tracker.params_seen[-1].band_delta == 0.12
+    for name, value, reason in [('band_delta', 5.0, 'range'),
+                                ('box_min_z', 5.0, 'box_min_z'),
+                                ('flow_method', 'farneback', 'read-only'),
+                                ('min_entity_points', 1.5, 'type')]:
+        result = h.node.set_parameters([Parameter(name, value=value)])[0]
+        assert not result.successful and reason in result.reason, (name, result.reason)
+    assert h.node.params.band_delta == 0.12 and h.node.params.box_min_z == 0.4
+
+
+def test_stamps_jumping_back_reset_tracker(harness):
+    h = harness()
+    h.send(100_000_000_000)
+    assert h.wait_clouds(1)
+    h.send(10_000_000_000)
+    assert h.wait_clouds(2)
+    assert h.tracker.resets == 1
+    assert convert.stamp_to_ns(h.clouds[1].header.stamp) == 10_000_000_000
+
+
+def test_diagnostics_published(harness):
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    h = harness(diagnostics_period=0.2)
+    got: list = []
+    h.tester.create_subscription(DiagnosticArray, '/diagnostics', got.append, 10)
+    h.send(11_000_000_000)
+    assert h.wait_clouds(1)
+    assert spin_until(h.executor, lambda: any(
+        ('processed', '1') in [(v.key, v.value) for s in a.status for v in s.values]
+        for a in got))
+
+
+def test_latest_slot_skips_unconsumed():
+    slot: LatestSlot[int] = LatestSlot()
+    for i in range(5):
+        slot.put(i)
+    assert slot.take(0) == 4 and slot.skipped == 4
+    assert slot.take(0) is None
+    slot.close()
+    assert slot.take(None) is None
