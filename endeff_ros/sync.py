@@ -16,8 +16,9 @@ full queue). Every dropped message is counted per input.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 
 @dataclass
@@ -43,6 +44,13 @@ class ApproximateTimeSynchronizer:
             msg = (f'synchroniser needs n_inputs >= 1, queue_size >= 1, slop >= 0 '
                    f'(got {n_inputs}, {queue_size}, {slop_ns})')
             raise ValueError(msg)
+        bad = [i for i in latched if not 0 <= i < n_inputs]
+        if bad:
+            msg = f'latched input(s) {bad} out of range for {n_inputs} inputs'
+            raise ValueError(msg)
+        if len(set(latched)) >= n_inputs:
+            msg = 'synchroniser needs at least one input that is not latched'
+            raise ValueError(msg)
         self.n_inputs = n_inputs
         self.queue_size = queue_size
         self.slop_ns = slop_ns
@@ -55,6 +63,9 @@ class ApproximateTimeSynchronizer:
 
     def add(self, index: int, stamp_ns: int, msg: Any) -> list[tuple[Any, ...]]:
         """Feed one message of input ``index``; returns (and calls back with) completed sets."""
+        if not 0 <= index < self.n_inputs:
+            msg = f'input index {index} out of range for {self.n_inputs} inputs'
+            raise IndexError(msg)
         if index in self.latched:
             self._latest[index] = msg
             return self._drain()
@@ -87,26 +98,29 @@ class ApproximateTimeSynchronizer:
         streams = [i for i in range(self.n_inputs) if i not in self.latched]
         if any(i not in self._latest for i in self.latched):
             return None
-        if any(not self._queues[i] for i in streams):
-            return None
-        # Pivot: the oldest head among the streams. Drop heads that cannot pair with any
-        # message of another stream because that stream's messages are all too new.
-        pivot_stream = min(streams, key=lambda i: self._queues[i][0][0])
-        pivot_ns = self._queues[pivot_stream][0][0]
-        chosen: dict[int, tuple[int, Any]] = {pivot_stream: self._queues[pivot_stream][0]}
-        for i in streams:
-            if i == pivot_stream:
-                continue
-            best = min(self._queues[i], key=lambda item: abs(item[0] - pivot_ns))
-            if abs(best[0] - pivot_ns) > self.slop_ns:
-                if best[0] > pivot_ns + self.slop_ns and all(
-                        item[0] > pivot_ns + self.slop_ns for item in self._queues[i]):
-                    # Nothing on input i will ever pair with the pivot: drop it.
-                    self._queues[pivot_stream].popleft()
-                    self.stats.dropped[pivot_stream] += 1
-                    return self._match()
+        chosen: dict[int, tuple[int, Any]] | None = None
+        while chosen is None:
+            if any(not self._queues[i] for i in streams):
                 return None
-            chosen[i] = best
+            # Pivot: the oldest head among the streams. Drop heads that cannot pair with any
+            # message of another stream because that stream's messages are all too new.
+            # (A loop, not recursion: a long backlog must not hit the recursion limit.)
+            pivot_stream = min(streams, key=lambda i: self._queues[i][0][0])
+            pivot_ns = self._queues[pivot_stream][0][0]
+            chosen = {pivot_stream: self._queues[pivot_stream][0]}
+            for i in streams:
+                if i == pivot_stream:
+                    continue
+                best = min(self._queues[i], key=lambda item: abs(item[0] - pivot_ns))
+                if abs(best[0] - pivot_ns) > self.slop_ns:
+                    if all(item[0] > pivot_ns + self.slop_ns for item in self._queues[i]):
+                        # Nothing on input i will ever pair with the pivot: drop it.
+                        self._queues[pivot_stream].popleft()
+                        self.stats.dropped[pivot_stream] += 1
+                        chosen = None
+                        break
+                    return None
+                chosen[i] = best
         # Emit: remove the chosen messages and everything older on each stream.
         newest = max(item[0] for item in chosen.values())
         for i, item in chosen.items():
