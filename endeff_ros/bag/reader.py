@@ -282,6 +282,7 @@ class BagReader:
         self.selection: TopicSelection | None = None
         self.topic_types: dict[str, str | None] = {}
         self.topic_counts: dict[str, int] = {}
+        self._gt_read = 0
 
     # -- opening -------------------------------------------------------------------------------
 
@@ -376,6 +377,7 @@ class BagReader:
         pending: list[_Entry] = []  # depth entries fed but not yet emitted or yielded
         last_info: list[Any] = [None]
         last_yielded = [-1]
+        colors_used = 0
 
         def build(color: _Entry | None, depth: _Entry, info: Any) -> BagRecord | None:
             if depth.stamp <= last_yielded[0] or info is None:
@@ -403,6 +405,7 @@ class BagReader:
             elif i == 1:
                 pending.append(entry)
             for color, depth, info in sync.add(i, entry.stamp, entry if i < 2 else entry.msg):
+                colors_used += 1
                 newest = max(color.stamp, depth.stamp)
                 dead = [p for p in pending if p.stamp <= newest and p is not depth]
                 pending = [p for p in pending if p.stamp > newest]
@@ -418,15 +421,26 @@ class BagReader:
                 yield rec
         if stats.messages[sel.info] == 0:
             raise BagError(self.path, f'no camera info on {sel.info} (no intrinsics)')
-        # Colour messages the synchroniser dropped; depth drops are yielded colour-less.
-        stats.dropped[sel.color] += sync.stats.dropped[0]
+        read = dict(stats.messages)
+        if sel.gt:
+            read[sel.gt] = self._gt_read
+        for topic, got in read.items():
+            want = self.topic_counts.get(topic, 0)
+            if got < want:
+                raise BagError(self.path, f'{topic}: the bag lists {want} messages but only '
+                                          f'{got} could be read (truncated or corrupt file)')
+        # Colour images never paired (dropped by the synchroniser or left in its queue at the
+        # end); depth images without colour were yielded colour-less instead.
+        stats.dropped[sel.color] += stats.messages[sel.color] - colors_used
 
     def _read_gt(self, sel: TopicSelection) -> dict[int, npt.NDArray[np.float64]]:
         from endeff_ros.ros import convert
 
         out: dict[int, npt.NDArray[np.float64]] = {}
         conns = [c for c in self.reader.connections if c.topic == sel.gt]
+        self._gt_read = 0
         for conn, _, raw in self._messages(conns):
+            self._gt_read += 1
             msg = self._deserialize(raw, conn)
             try:
                 points = convert.cloud_to_array(msg)
