@@ -60,6 +60,9 @@ class EndeffParams:
                        'within δ_L (Eq. 3).', symbol='η_L', lo=1, hi=1000)
     subband_max_points: int = _p(60, 'A sub-band (connected piece of a band) larger than this '
                                  'is split along its main axis.', lo=2, hi=100000)
+    subband_min_points: int = _p(8, 'A sub-band smaller than this is merged into its '
+                                 'best-connected neighbour (it could not be attached).',
+                                 lo=1, hi=100000)
     root_bands: int = _p(6, 'Bands of the rough expansion whose points give the refined '
                          'centroid (size of the massive part, e.g. torso).', symbol='N',
                          lo=1, hi=1000)

@@ -1,0 +1,151 @@
+"""Section 4.2: topology graph over sub-bands, geodesic distances and end-effector search.
+
+- Nodes are sub-band centroids; an edge joins two sub-bands only when they are *attached*: each
+  has at least P points closer than λ to the other. Edge weight is the centroid distance (Eq. 5).
+- The geodesic distance of a node is the sum of the weights on its shortest path to the root
+  (Eq. 6); the approximate geodesic goes through the mid-band of that path (Eq. 7).
+- End-effectors are found by iterated Dijkstra (Baak et al.): the farthest node from the
+  target set is an end-effector; its path is joined to the target set by zero-weight edges
+  (equivalently, all of its nodes become sources), and the search repeats until the farthest
+  node is closer than g.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse import csgraph
+
+from .bands import UNREACHED, Neighbours
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+
+@dataclass(frozen=True)
+class TopologyGraph:
+    """Sub-band graph of the whole frame (entities are disconnected components).
+
+    ``centroids`` (K, 3) node positions; ``sizes`` (K,) points per node; ``band`` (K,) band
+    of each node; ``weights`` (K, K) sparse symmetric Eq. 5 weights.
+    """
+
+    centroids: npt.NDArray[np.float64]
+    sizes: npt.NDArray[np.intp]
+    band: npt.NDArray[np.intp]
+    weights: sparse.csr_matrix
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.centroids)
+
+    def shortest_paths(self, sources: npt.ArrayLike) -> tuple[npt.NDArray[np.float64],
+                                                              npt.NDArray[np.intp]]:
+        """Geodesic distance (Eq. 6) of every node to the nearest of ``sources`` and the
+        predecessor array (-9999 at sources and unreachable nodes)."""
+        dist, pred = csgraph.dijkstra(self.weights, directed=False, indices=sources,
+                                      return_predecessors=True, min_only=True)[:2]
+        return dist, pred
+
+    def geodesic_between(self, a: npt.ArrayLike, b: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """(len(a), len(b)) geodesic distances between nodes ``a`` and nodes ``b`` (inf if
+        they are in different components)."""
+        a = np.atleast_1d(np.asarray(a, dtype=np.intp))
+        b = np.atleast_1d(np.asarray(b, dtype=np.intp))
+        if a.size == 0 or b.size == 0:
+            return np.zeros((a.size, b.size))
+        dist = csgraph.dijkstra(self.weights, directed=False, indices=np.unique(a))
+        lookup = {node: row for row, node in enumerate(np.unique(a))}
+        return dist[[lookup[x] for x in a]][:, b]
+
+
+def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
+                band: npt.NDArray[np.intp], neighbours: Neighbours, *,
+                attach_distance: float, attach_points: int) -> TopologyGraph:
+    """Build the sub-band graph with attachment edges and Eq. 5 weights.
+
+    ``neighbours`` is a radius graph of the points whose radius is at least λ
+    (``attach_distance``); sub-band ``i`` and ``j`` are attached when at least P
+    (``attach_points``) points of ``i`` have a point of ``j`` within λ, and vice versa.
+    """
+    reached = subband != UNREACHED
+    k = int(subband.max()) + 1 if reached.any() else 0
+    sizes = np.bincount(subband[reached], minlength=k)
+    centroids = np.zeros((k, 3))
+    for axis in range(3):
+        centroids[:, axis] = np.bincount(subband[reached], weights=points[reached, axis],
+                                         minlength=k)
+    centroids /= np.maximum(sizes, 1)[:, None]
+    node_band = np.full(k, UNREACHED, dtype=np.intp)
+    node_band[subband[reached]] = band[reached]
+
+    near = neighbours.d < attach_distance
+    pi, pj = neighbours.i[near], neighbours.j[near]
+    si, sj = subband[pi], subband[pj]
+    keep = (si != sj) & (si != UNREACHED) & (sj != UNREACHED)
+    # Both directions: (sub-band of p, other sub-band, p).
+    a = np.concatenate([si[keep], sj[keep]])
+    b = np.concatenate([sj[keep], si[keep]])
+    p = np.concatenate([pi[keep], pj[keep]])
+    # Distinct points p of sub-band a having a neighbour in sub-band b.
+    n = len(points)
+    key = np.unique((a.astype(np.int64) * k + b) * n + p)
+    pair, count = np.unique(key // n, return_counts=True)
+    counts = sparse.csr_matrix((count, (pair // k, pair % k)), shape=(k, k))
+    attached = counts.minimum(counts.T) >= attach_points
+    rows, cols = sparse.triu(attached, k=1).nonzero()
+    w = np.linalg.norm(centroids[rows] - centroids[cols], axis=1)  # Eq. 5
+    w = np.maximum(w, 1e-9)
+    weights = sparse.csr_matrix((np.r_[w, w], (np.r_[rows, cols], np.r_[cols, rows])),
+                                shape=(k, k))
+    return TopologyGraph(centroids, sizes, node_band, weights)
+
+
+def path_to_sources(pred: npt.NDArray[np.intp], node: int) -> npt.NDArray[np.intp]:
+    """Nodes from ``node`` back to its source along a predecessor array (inclusive)."""
+    path = [node]
+    while pred[path[-1]] >= 0:
+        path.append(int(pred[path[-1]]))
+    return np.array(path, dtype=np.intp)
+
+
+def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
+                       max_count: int) -> list[tuple[int, npt.NDArray[np.intp]]]:
+    """Iterated Dijkstra with zero-weight edges along each found path (Baak et al.).
+
+    Returns ``(node, path)`` per end-effector in the order found, ``path`` running from the
+    end-effector to the root over the original graph (for Eqs. 6-7).
+    """
+    dist_root, pred_root = graph.shortest_paths([root])
+    sources = [root]
+    found: list[tuple[int, npt.NDArray[np.intp]]] = []
+    while len(found) < max_count:
+        dist, pred = graph.shortest_paths(sources)
+        dist = np.where(np.isfinite(dist), dist, -1.0)
+        node = int(np.argmax(dist))
+        if dist[node] < min_geodesic:
+            break
+        found.append((node, path_to_sources(pred_root, node)))
+        # Zero-weight edges from every node of the new path to the target: add them as sources.
+        sources.extend(path_to_sources(pred, node)[:-1].tolist())
+    return found
+
+
+def geodesic(graph: TopologyGraph, path: npt.NDArray[np.intp]) -> float:
+    """Eq. 6: the sum of edge weights along ``path``."""
+    seg = graph.centroids[path[1:]] - graph.centroids[path[:-1]]
+    return float(np.linalg.norm(seg, axis=1).sum())
+
+
+def approximate_geodesic(position: npt.NDArray[np.float64], graph: TopologyGraph,
+                         path: npt.NDArray[np.intp], root: npt.NDArray[np.float64]) -> float:
+    """Eq. 7: dist_E(e, mid) + dist_E(mid, L_0^0), ``mid`` the mid-band of the shortest path.
+
+    The mid-band is the node halfway along the path (by node count); it makes the distance
+    robust to occlusions that lengthen the full path (Fig. 3a).
+    """
+    mid = graph.centroids[path[len(path) // 2]]
+    return float(np.linalg.norm(position - mid) + np.linalg.norm(mid - root))
