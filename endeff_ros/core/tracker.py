@@ -1,12 +1,54 @@
-"""Predict-update tracker of Section 5."""
+"""Predict-update tracker of Section 5: end-effectors kept stable over time.
+
+Per frame t+1:
+
+1. **Single-frame candidates** E^est_{t+1} from Section 4 (:func:`estimate_frame`).
+2. **Predict** (§5.1): the end-effectors E_t are moved by the 3D scene flow (dense optical flow
+   between the colour images back-projected with depth and K: :mod:`.flow`), giving E^pr_{t+1}.
+   Without a colour pair (first frame, dropped colour) the prediction is zero motion.
+3. **Rectify**: each prediction snaps to the closest current foreground point, which gives it
+   a node of the current topology graph (and its entity). A prediction farther than
+   ``max_rectify_distance`` from every point has left the foreground and is dropped.
+4. **Correspondence**: similarity between a prediction and a candidate is inversely
+   proportional to their geodesic distance in the current graph,
+   ``s = 1 / (1 + d_G / similarity_scale)``; the Hungarian algorithm (scipy) maximises it.
+5. **Cases**: a matched pair with s > ε_a is *related* (case A); with ε_b < s <= ε_a it is an
+   *unrelated* pair (case B), where ε_b is the similarity of the larger geodesic distance of the
+   two to the root (times ``unrelated_ratio``): two real end-effectors are farther apart than
+   either is from the root, so they are not compared; everything else is *unmatched* (case C).
+6. **Selection**: in case B the candidate with the longer approximate geodesic distance
+   (Eq. 7, memorised by Eq. 8 for predictions) survives; a case-C prediction is kept at most
+   T frames; an unmatched current candidate starts a new track. In case A the pair is one
+   end-effector; its position is the current detection: the paper favours "the natural
+   detection of end-effectors" and the prediction only guides it when needed.
+7. **Memory** (Eqs. 8-9): a track's geodesic distance is
+   ``α d(e_t) + (1 - α) d(e^pr_{t+1})`` with ``α = σ^k`` while it lives on predictions, k the
+   frames since it was last related; a detection takes its current Eq. 7 value.
+
+Each track has a stable id, its entity, age, state (detected / predicted) and a confidence
+``σ^k (T + 1 - m) / (T + 1)`` with m the consecutive unmatched frames (1 for a fresh detection).
+"""
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.spatial import cKDTree
+
+from .bands import UNREACHED
+from .cloud import FloorPlane
+from .flow import FlowEstimator, propagate_points
+from .graph import approximate_geodesic, path_to_sources
 from .params import EndeffParams
-from .single_frame import FrameEstimate
-from .types import RGBDFrame, Track
+from .single_frame import FrameEstimate, estimate_frame
+from .types import Candidate, RGBDFrame, Track
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
 
 
 @dataclass(frozen=True)
@@ -19,16 +61,247 @@ class TrackerResult:
     estimate: FrameEstimate
     stage_ms: dict[str, float] = field(default_factory=dict)
 
+    def positions(self) -> npt.NDArray[np.float64]:
+        """(M, 3) positions of the tracks."""
+        return np.array([t.position for t in self.tracks], dtype=np.float64).reshape(-1, 3)
+
+
+@dataclass
+class _TrackState:
+    """Mutable per-track memory between frames."""
+
+    id: int
+    position: npt.NDArray[np.float64]
+    geodesic: float  # dist_G^ap memory (Eq. 8)
+    entity: int = 0
+    not_related: int = 0  # k of Eq. 9
+    missed: int = 0  # consecutive case-C frames
+    age: int = 1
+    path: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    detected: bool = True
+
+
+@dataclass(frozen=True)
+class _Prediction:
+    """A rectified prediction E^pr_{t+1} of one track."""
+
+    track: _TrackState
+    position: npt.NDArray[np.float64]
+    node: int  # graph node of the closest current point, -1 if none
+    entity: int
+    geodesic_now: float  # Eq. 7 in the current graph, nan if unreachable
+
 
 class Tracker:
-    """Keeps end-effectors stable over time. ``params`` may be replaced between frames."""
+    """Keeps end-effectors stable over time (Section 5). ``params`` may change between frames."""
 
     def __init__(self, params: EndeffParams | None = None) -> None:
         self.params = params or EndeffParams()
+        self._flow: FlowEstimator | None = None
+        self.reset()
 
     def reset(self) -> None:
         """Forget all tracks (e.g. when time jumps backwards during bag replay)."""
+        self._tracks: list[_TrackState] = []
+        self._next_id = 0
+        self._prev: RGBDFrame | None = None
+        self._floor: FloorPlane | None = None
+
+    def _flow_estimator(self) -> FlowEstimator:
+        if self._flow is None or self._flow.method != self.params.flow_method:
+            self._flow = FlowEstimator(self.params.flow_method)
+        return self._flow
 
     def update(self, frame: RGBDFrame) -> TrackerResult:
         """Process one frame and return the current end-effectors."""
-        raise NotImplementedError('being written')
+        p = self.params
+        estimate = estimate_frame(frame, p, floor=self._floor)
+        self._floor = estimate.floor
+        stages = dict(estimate.stage_ms)
+        t0 = time.perf_counter()
+        predicted = self._predict(frame)
+        stages['predict'] = (time.perf_counter() - t0) * 1e3
+        t0 = time.perf_counter()
+        self._tracks = self._update(estimate, predicted)
+        stages['update'] = (time.perf_counter() - t0) * 1e3
+        self._prev = frame
+        tracks = [self._publish(t) for t in self._tracks]
+        return TrackerResult(frame.stamp_ns, frame.frame_id, tracks, estimate, stages)
+
+    # -- predict (Section 5.1) ---------------------------------------------------------------
+
+    def _predict(self, frame: RGBDFrame) -> npt.NDArray[np.float64]:
+        """E^pr_{t+1}: previous positions moved by the scene flow (zero motion without it)."""
+        positions = np.array([t.position for t in self._tracks]).reshape(-1, 3)
+        prev = self._prev
+        if (len(positions) == 0 or prev is None or prev.color is None or frame.color is None
+                or prev.depth.shape != frame.depth.shape):
+            return positions
+        flow = self._flow_estimator().flow(prev.color, frame.color)
+        moved, _ = propagate_points(positions, flow, prev.depth, frame.depth, frame.intrinsics)
+        return moved
+
+    # -- update (Section 5.2) ----------------------------------------------------------------
+
+    def _rectify(self, estimate: FrameEstimate,
+                 predicted: npt.NDArray[np.float64]) -> list[_Prediction]:
+        """Snap predictions to the closest current point; attach graph node and Eq. 7."""
+        out: list[_Prediction] = []
+        if len(predicted) == 0:
+            return out
+        p = self.params
+        pts = estimate.points
+        usable = np.flatnonzero(estimate.subband != UNREACHED)
+        if usable.size == 0:
+            return [_Prediction(t, predicted[i], -1, t.entity, np.nan)
+                    for i, t in enumerate(self._tracks)]
+        dist, nearest = cKDTree(pts[usable]).query(predicted)
+        for i, track in enumerate(self._tracks):
+            if dist[i] > p.max_rectify_distance:
+                out.append(_Prediction(track, predicted[i], -1, track.entity, np.nan))
+                continue
+            idx = usable[nearest[i]]
+            node = int(estimate.subband[idx])
+            entity = int(estimate.entity[idx])
+            geo = self._geodesic_at(estimate, entity, node, pts[idx])
+            out.append(_Prediction(track, pts[idx], node, entity, geo))
+        return out
+
+    @staticmethod
+    def _geodesic_at(estimate: FrameEstimate, entity: int, node: int,
+                     position: npt.NDArray[np.float64]) -> float:
+        """Eq. 7 for an arbitrary point of the current cloud (a rectified prediction)."""
+        if entity < 0 or estimate.graph is None:
+            return np.nan
+        ent = estimate.entities[entity]
+        dist, pred = estimate.graph.shortest_paths([ent.root_node])
+        if not np.isfinite(dist[node]):
+            return np.nan
+        path = path_to_sources(pred, node)
+        return approximate_geodesic(position, estimate.graph, path, ent.root)
+
+    def _similarity(self, estimate: FrameEstimate, preds: list[_Prediction],
+                    cands: list[Candidate]) -> tuple[npt.NDArray[np.float64],
+                                                     npt.NDArray[np.float64]]:
+        """Similarity s (P, C) and geodesic distance d_G (P, C) between predictions and
+        candidates in the current graph (0 / inf across entities or without a node)."""
+        n_p, n_c = len(preds), len(cands)
+        geo = np.full((n_p, n_c), np.inf)
+        if n_p and n_c and estimate.graph is not None:
+            rows = [i for i, pr in enumerate(preds) if pr.node >= 0]
+            if rows:
+                g = estimate.graph.geodesic_between([preds[i].node for i in rows],
+                                                    [c.node for c in cands])
+                euclid = np.linalg.norm(np.array([preds[i].position for i in rows])[:, None]
+                                        - np.array([c.position for c in cands])[None], axis=2)
+                geo[rows] = np.maximum(g, euclid)
+        sim = 1.0 / (1.0 + geo / self.params.similarity_scale)
+        return sim, geo
+
+    def _update(self, estimate: FrameEstimate,
+                predicted: npt.NDArray[np.float64]) -> list[_TrackState]:
+        p = self.params
+        cands = [c for e in estimate.entities for c in e.candidates]
+        cand_entity = [e.entity for e in estimate.entities for _ in e.candidates]
+        preds = self._rectify(estimate, predicted)
+        sim, geo = self._similarity(estimate, preds, cands)
+        rows, cols = (linear_sum_assignment(-sim) if sim.size
+                      else (np.zeros(0, int), np.zeros(0, int)))
+        matched_pred: dict[int, int] = {}
+        for i, j in zip(rows, cols):
+            if sim[i, j] > 0:
+                matched_pred[int(i)] = int(j)
+
+        survivors: list[_TrackState] = []
+        used_cands: set[int] = set()
+        for i, pr in enumerate(preds):
+            track = pr.track
+            j = matched_pred.get(i)
+            case = 'C'
+            if j is not None:
+                cand = cands[j]
+                if sim[i, j] > p.related_similarity:
+                    case = 'A'
+                else:
+                    pred_geo = self._memory(track, pr.geodesic_now, related=False)
+                    eps_b_geo = p.unrelated_ratio * max(pred_geo, cand.geodesic_approx)
+                    case = 'B' if geo[i, j] < eps_b_geo else 'C'
+            if case == 'A':
+                cand = cands[j]
+                used_cands.add(j)
+                self._take_detection(track, cand, cand_entity[j], related=True)
+                survivors.append(track)
+            elif case == 'B':
+                cand = cands[j]
+                used_cands.add(j)
+                pred_geo = self._memory(track, pr.geodesic_now, related=False)
+                if cand.geodesic_approx >= pred_geo:
+                    # The current candidate wins (Fig. 7c): the track follows it.
+                    self._take_detection(track, cand, cand_entity[j], related=False)
+                else:
+                    # The memorised end-effector wins (Fig. 7b); the candidate is dropped.
+                    self._take_prediction(track, pr, pred_geo, missed=False)
+                survivors.append(track)
+            else:
+                if pr.node < 0 and np.isnan(pr.geodesic_now) and self._left_view(pr):
+                    continue
+                if track.missed + 1 > p.keep_frames:
+                    continue  # case C for more than T frames: removed
+                pred_geo = self._memory(track, pr.geodesic_now, related=False)
+                self._take_prediction(track, pr, pred_geo, missed=True)
+                survivors.append(track)
+        for j, cand in enumerate(cands):
+            if j in used_cands:
+                continue
+            survivors.append(_TrackState(
+                id=self._new_id(), position=cand.position, geodesic=cand.geodesic_approx,
+                entity=cand_entity[j], path=cand.path))
+        return survivors
+
+    def _left_view(self, pr: _Prediction) -> bool:
+        """True when a prediction is far from every current point (it left the foreground)."""
+        return pr.node < 0
+
+    def _memory(self, track: _TrackState, geodesic_now: float, *, related: bool) -> float:
+        """Eq. 8 for a track that continues on its prediction (α = σ^k, Eq. 9)."""
+        k = 0 if related else track.not_related + 1
+        alpha = self.params.memory_sigma ** k
+        if not np.isfinite(geodesic_now):
+            return track.geodesic * alpha
+        return alpha * track.geodesic + (1.0 - alpha) * geodesic_now
+
+    @staticmethod
+    def _take_detection(track: _TrackState, cand: Candidate, entity: int, *,
+                        related: bool) -> None:
+        track.position = cand.position
+        track.geodesic = cand.geodesic_approx  # Eq. 8, second case
+        track.entity = entity
+        track.path = cand.path
+        track.not_related = 0 if related else track.not_related + 1
+        track.missed = 0
+        track.age += 1
+        track.detected = True
+
+    @staticmethod
+    def _take_prediction(track: _TrackState, pr: _Prediction, geodesic: float, *,
+                         missed: bool) -> None:
+        track.position = pr.position
+        track.geodesic = geodesic  # Eq. 8, first case
+        track.entity = pr.entity
+        track.not_related += 1
+        track.missed = track.missed + 1 if missed else 0
+        track.age += 1
+        track.detected = False
+
+    def _new_id(self) -> int:
+        self._next_id += 1
+        return self._next_id - 1
+
+    def _publish(self, t: _TrackState) -> Track:
+        p = self.params
+        confidence = (p.memory_sigma ** t.not_related
+                      * (p.keep_frames + 1 - t.missed) / (p.keep_frames + 1))
+        return Track(id=t.id, entity=t.entity, position=np.array(t.position, dtype=np.float64),
+                     geodesic=float(t.geodesic), confidence=float(np.clip(confidence, 0, 1)),
+                     state=Track.DETECTED if t.detected else Track.PREDICTED, age=t.age,
+                     path=t.path)
