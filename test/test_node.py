@@ -277,3 +277,19 @@ def test_latest_slot_skips_unconsumed():
     assert slot.take(0) is None
     slot.close()
     assert slot.take(None) is None
+
+
+def test_depth_without_colour_is_processed_colourless_once(harness):
+    h = harness(color_timeout=0.05)
+    h.send(12_000_000_000, color=False)
+    assert h.wait_clouds(1)
+    assert h.tracker.frames[0].color is None and h.node.stats.colorless == 1
+    # Its colour arriving late must not produce a second cloud for the same stamp.
+    h.pub['color'].publish(image_msg(np.zeros((H, W, 3), np.uint8), 'rgb8', 12_003_000_000,
+                                     'color_frame'))
+    assert spin_until(h.executor, lambda: h.node.stats.duplicates == 1)
+    h.send(12_100_000_000)
+    assert h.wait_clouds(2)
+    assert [convert.stamp_to_ns(c.header.stamp) for c in h.clouds] == [12_000_000_000,
+                                                                       12_100_000_000]
+    assert h.tracker.frames[1].color is not None

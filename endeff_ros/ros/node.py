@@ -20,18 +20,11 @@ from types import SimpleNamespace
 from typing import Any
 
 import rclpy
-from rcl_interfaces.msg import (
-    FloatingPointRange,
-    IntegerRange,
-    ParameterDescriptor,
-    ParameterType,
-    SetParametersResult,
-)
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
@@ -43,11 +36,11 @@ from endeff_ros.ros.processing import (
     NODE_PARAMS,
     LatestSlot,
     NodeStats,
-    describe_text,
     flatten,
     updated_params,
     validate_node_changes,
 )
+from endeff_ros.ros.ros_params import descriptor, qos
 from endeff_ros.sync import ApproximateTimeSynchronizer
 
 try:
@@ -56,31 +49,8 @@ except ImportError:  # pragma: no cover - diagnostic_msgs is part of common_inte
     DiagnosticArray = None
     from std_msgs.msg import String
 
-_TYPES = {'float': ParameterType.PARAMETER_DOUBLE, 'int': ParameterType.PARAMETER_INTEGER,
-          'bool': ParameterType.PARAMETER_BOOL, 'str': ParameterType.PARAMETER_STRING}
 _TOPICS = {'color': 'color/image_raw', 'depth': 'depth/image_raw',
            'camera_info': 'depth/camera_info'}
-
-
-def descriptor(row: dict[str, Any]) -> ParameterDescriptor:
-    """ParameterDescriptor of one parameter-table row (type, description, range, read-only)."""
-    d = ParameterDescriptor(name=row['name'], type=_TYPES[row['type']],
-                            description=describe_text(row), read_only=not row['runtime'])
-    if row['lo'] is not None and row['hi'] is not None:
-        if row['type'] == 'float':
-            d.floating_point_range = [FloatingPointRange(
-                from_value=float(row['lo']), to_value=float(row['hi']), step=0.0)]
-        elif row['type'] == 'int':
-            d.integer_range = [IntegerRange(from_value=int(row['lo']), to_value=int(row['hi']),
-                                            step=1)]
-    return d
-
-
-def _qos(reliability: str, depth: int) -> QoSProfile:
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                      durability=DurabilityPolicy.VOLATILE,
-                      reliability=ReliabilityPolicy.RELIABLE if reliability == 'reliable'
-                      else ReliabilityPolicy.BEST_EFFORT)
 
 
 class EndeffNode(Node):
@@ -104,10 +74,12 @@ class EndeffNode(Node):
         self._first_unpaired_depth: float | None = None
         self._newest_ns: int | None = None
         self._reset_pending = False
+        self._waiting: dict[int, tuple[Any, float]] = {}  # depth stamp -> (msg, receipt)
+        self._floor_ns: int | None = None  # newest depth stamp handed to the worker
         self._params_pending: EndeffParams | None = None
         self._dropped_before = {k: 0 for k in self._inputs}
         self._sync = self._make_sync(self._p('sync_queue_size'), self._p('sync_slop'))
-        qos_out = _qos(self._p('output_reliability'), 5)
+        qos_out = qos(self._p('output_reliability'), 5)
         self.pub_cloud = self.create_publisher(PointCloud2, 'end_effectors', qos_out)
         self.pub_markers = self.create_publisher(MarkerArray, 'end_effectors/markers', qos_out)
         self.pub_bands = self.create_publisher(PointCloud2, 'debug/bands', qos_out)
@@ -116,7 +88,7 @@ class EndeffNode(Node):
             self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         else:  # pragma: no cover
             self.pub_diag = self.create_publisher(String, '~/statistics', 10)
-        qos_in = _qos(self._p('input_reliability'), self._p('input_queue_depth'))
+        qos_in = qos(self._p('input_reliability'), self._p('input_queue_depth'))
         # Camera info first: when several inputs are ready, the executor serves it first.
         self._subs = [self.create_subscription(CameraInfo if kind == 'camera_info' else Image,
                                                _TOPICS[kind], partial(self._on_input, kind),
@@ -169,13 +141,45 @@ class EndeffNode(Node):
                 self._newest_ns = max(stamp, self._newest_ns or stamp)
             if kind == 'depth' and self._first_unpaired_depth is None:
                 self._first_unpaired_depth = receipt
-            sets = self._sync.add(self._inputs.index(kind), stamp, msg)
-        for found in sets:
-            self._slot.put((dict(zip(self._inputs, found)), receipt))
+            if kind == 'depth' and 'color' in self._inputs:
+                self._waiting[stamp] = (msg, receipt)
+            ready = [self._claim(dict(zip(self._inputs, found)))
+                     for found in self._sync.add(self._inputs.index(kind), stamp, msg)]
+        for msgs in ready:
+            if msgs is not None:
+                self._slot.put((msgs, receipt))
+
+    def _claim(self, msgs: dict[str, Any]) -> dict[str, Any] | None:
+        """Accept a set unless its depth is not newer than one already handed on (lock held)."""
+        stamp = convert.stamp_to_ns(msgs['depth'].header.stamp)
+        for old in [s for s in self._waiting if s <= stamp]:
+            del self._waiting[old]
+        if self._floor_ns is not None and stamp <= self._floor_ns:
+            self.stats.duplicates += 1
+            return None
+        self._floor_ns = stamp
+        return msgs
+
+    def _flush_colorless(self, now: float) -> None:
+        """Hand on the newest depth image that waited ``color_timeout`` for its colour."""
+        with self._lock:
+            timeout = self._p('color_timeout')
+            expired = sorted(s for s, (_, t) in self._waiting.items() if now - t > timeout)
+            if not expired or self._last_info is None:
+                return
+            msg, receipt = self._waiting[expired[-1]]
+            for stamp in expired:
+                del self._waiting[stamp]
+            msgs = self._claim({'color': None, 'depth': msg, 'camera_info': self._last_info})
+            self.stats.colorless += msgs is not None
+        if msgs is not None:
+            self._slot.put((msgs, receipt))
 
     def _request_reset(self) -> None:
         """Forget the tracks and the synchroniser state (caller holds the lock)."""
         self._reset_pending = True
+        self._waiting.clear()
+        self._floor_ns = None
         self._replace_sync(self._p('sync_queue_size'), self._p('sync_slop'))
         self._slot.clear()
 
@@ -204,11 +208,12 @@ class EndeffNode(Node):
     def _run(self) -> None:
         next_diag = next_log = time.monotonic()
         while not self._slot.closed:
-            item = self._slot.take(timeout=0.1)
+            item = self._slot.take(timeout=0.02)
             try:
                 if item is not None:
                     self._process(*item)
                 now = time.monotonic()
+                self._flush_colorless(now)
                 self._check_camera_info(now)
                 if now >= next_diag:
                     next_diag = now + self._p('diagnostics_period')

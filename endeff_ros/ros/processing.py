@@ -42,6 +42,9 @@ NODE_PARAMS: list[dict[str, Any]] = [
          lo=1, hi=1000),
     _row('sync_slop', 0.02, 'Approximate-time synchroniser: largest stamp difference between '
          'colour and depth of one set.', unit='s', lo=0.0, hi=1.0),
+    _row('color_timeout', 0.1, 'A depth image still without a colour partner after this '
+         'long is processed without colour (as the offline bag reader does).', unit='s',
+         lo=0.0, hi=10.0),
     _row('publish_debug_bands', False, 'Publish debug/bands: the foreground cloud coloured '
          'by sub-band.'),
     _row('publish_debug_image', False, 'Publish debug/image: the colour image with the '
@@ -158,6 +161,8 @@ class NodeStats:
     received: dict[str, int] = field(default_factory=lambda: {'color': 0, 'depth': 0,
                                                               'camera_info': 0})
     processed: int = 0
+    colorless: int = 0
+    duplicates: int = 0
     published_empty: int = 0
     bad_input: int = 0
     errors: int = 0
@@ -177,6 +182,7 @@ class NodeStats:
         """Flat, JSON-friendly snapshot."""
         return {
             'received': dict(self.received), 'sets': sets, 'processed': self.processed,
+            'colorless': self.colorless, 'duplicates': self.duplicates,
             'skipped': skipped, 'dropped_unpaired': dict(dropped),
             'published_empty': self.published_empty, 'bad_input': self.bad_input,
             'errors': self.errors, 'resets': self.resets, 'warnings': dict(self.warnings),
