@@ -64,6 +64,7 @@ class BagSpec:
     n_blobs: int = 3
     fx: float = FX
     blob_px: int = BLOB_PX
+    gt_stamp_offset_ns: int = 0  # ground truth stamped this much off the depth stamp
 
 
 def gt_positions(spec: BagSpec, i: int) -> np.ndarray:
@@ -179,7 +180,8 @@ def write_bag(path: Path, spec: BagSpec | None = None) -> dict[int, np.ndarray]:
         if spec.gt_frames is None or i in spec.gt_frames:
             truth[stamp] = gt_positions(spec, i)
             rows.append((log + 3, spec.topics['gt'], 'sensor_msgs/msg/PointCloud2',
-                         cloud_msg(stamp, spec.frame_id, truth[stamp])))
+                         cloud_msg(stamp + spec.gt_stamp_offset_ns, spec.frame_id,
+                                   truth[stamp])))
     if spec.shuffle_log:
         rng = np.random.default_rng(0)
         logs = sorted(r[0] for r in rows)

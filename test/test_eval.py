@@ -1,0 +1,213 @@
+"""``endeff eval``: both estimators scored per bag, spec JSON report, table, plots."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from bag_helpers import (
+    BagSpec,
+    FakeTracker,
+    bench_like_spec,
+    fake_estimate_frame,
+    real_core,  # noqa: F401 - fixture
+    write_bag,
+)
+
+from endeff_ros.cli import main as cli_main
+from endeff_ros.evaluate import evaluate_bags, format_table
+
+SPEC_METHOD_KEYS = {'recall', 'mean_error_m', 'fpr'}
+
+
+def _check_spec_form(report: dict[str, Any]) -> None:
+    """The contract's report keys and types (extra keys are allowed)."""
+    assert {'sequences', 'overall'} <= set(report)
+    for seq in report['sequences']:
+        assert {'bag', 'frames', 'scored_frames', 'temporal', 'single_frame'} <= set(seq)
+        assert isinstance(seq['bag'], str)
+        assert isinstance(seq['frames'], int) and isinstance(seq['scored_frames'], int)
+        for m in ('temporal', 'single_frame'):
+            assert set(seq[m]) == SPEC_METHOD_KEYS
+    for m in ('temporal', 'single_frame'):
+        assert set(report['overall'][m]) == SPEC_METHOD_KEYS
+
+
+def _lagging_estimate(frame: Any, params: Any = None) -> Any:
+    """Single-frame fake that also reports a far-away false positive."""
+    est = fake_estimate_frame(frame, params)
+
+    class _Est:
+        def positions(self) -> np.ndarray:
+            return np.vstack([est.positions(), [[5.0, 5.0, 5.0]]])
+
+    return _Est()
+
+
+def test_scores_bags_of_both_storages(tmp_path: Path) -> None:
+    write_bag(tmp_path / 'data' / 'mcap' / 'seq_a', BagSpec(frames=8, drop_color={4}))
+    write_bag(tmp_path / 'data' / 'sqlite3' / 'seq_b',
+              BagSpec(frames=6, storage='sqlite3', gt_frames={1, 2, 5}))
+    report, results = evaluate_bags([tmp_path / 'data'], estimate_fn=_lagging_estimate,
+                                    tracker_factory=FakeTracker)
+    _check_spec_form(report)
+    seqs = {s['bag']: s for s in report['sequences']}
+    assert set(seqs) == {'seq_a', 'seq_b'}
+    assert (seqs['seq_a']['frames'], seqs['seq_a']['scored_frames']) == (8, 8)
+    assert (seqs['seq_b']['frames'], seqs['seq_b']['scored_frames']) == (6, 3)
+    for s in seqs.values():
+        # Blob centroids hit every ground-truth point (wrong-frame matching would not: the
+        # points move about 0.15 m per frame).
+        assert s['temporal']['recall'] == 1.0 and s['temporal']['fpr'] == 0.0
+        assert 0.0 < s['temporal']['mean_error_m'] < 0.03
+        # The single-frame fake adds one false positive to three true ones: FPR 1/4.
+        assert s['single_frame']['recall'] == 1.0
+        assert s['single_frame']['fpr'] == pytest.approx(0.25)
+        assert len(s['per_frame']['temporal_recall']) == s['scored_frames']
+        assert len(s['per_frame']['stamp_ns']) == s['scored_frames']
+    assert report['overall']['single_frame']['fpr'] == pytest.approx(0.25)
+    assert report['failed'] == []
+    table = format_table(report)
+    assert 'seq_a' in table and 'overall' in table and 'single-frame' in table
+
+
+def test_ground_truth_needs_exact_stamp(tmp_path: Path) -> None:
+    write_bag(tmp_path / 'off', BagSpec(frames=4, gt_stamp_offset_ns=1))
+    report, _ = evaluate_bags([tmp_path / 'off'], estimate_fn=fake_estimate_frame,
+                              tracker_factory=FakeTracker)
+    seq = report['sequences'][0]
+    assert seq['frames'] == 4 and seq['scored_frames'] == 0
+    assert seq['temporal']['recall'] is None  # undefined, not 0
+    assert seq['read_stats']['gt_unmatched'] == 4
+
+
+def test_duplicate_names_and_failures(tmp_path: Path) -> None:
+    write_bag(tmp_path / 'mcap' / 'seq', BagSpec(frames=3))
+    write_bag(tmp_path / 'sqlite3' / 'seq', BagSpec(frames=3, storage='sqlite3'))
+    write_bag(tmp_path / 'bad' / 'enc', BagSpec(frames=3, depth_encoding='8UC1'))
+    report, _ = evaluate_bags([tmp_path / 'mcap', tmp_path / 'sqlite3', tmp_path / 'bad',
+                               tmp_path / 'missing'], estimate_fn=fake_estimate_frame,
+                              tracker_factory=FakeTracker)
+    assert [s['bag'] for s in report['sequences']] == ['mcap/seq', 'sqlite3/seq']
+    errors = {Path(f['bag']).name: f['error'] for f in report['failed']}
+    assert set(errors) == {'enc', 'missing'}
+    assert '8UC1' in errors['enc'] and str(tmp_path / 'bad' / 'enc') in errors['enc']
+    assert 'no such file' in errors['missing']
+
+
+def test_groups_use_synth_names(tmp_path: Path) -> None:
+    synth = pytest.importorskip('endeff_ros.synth', reason='synthetic generator not present')
+    groups = synth.GROUPS
+    name = groups['occlusion'][0]
+    write_bag(tmp_path / name, BagSpec(frames=3))
+    write_bag(tmp_path / 'unrelated', BagSpec(frames=3))
+    report, _ = evaluate_bags([tmp_path], estimate_fn=fake_estimate_frame,
+                              tracker_factory=FakeTracker)
+    assert list(report['groups']) == ['occlusion']
+    assert report['groups']['occlusion']['sequences'] == [name]
+    assert report['groups']['occlusion']['temporal']['recall'] == 1.0
+
+
+def _patch_core(monkeypatch: pytest.MonkeyPatch, seen: list[Any]) -> None:
+    import endeff_ros.core.single_frame as sf
+    import endeff_ros.core.tracker as tr
+
+    def estimate(frame: Any, params: Any = None) -> Any:
+        seen.append(params)
+        return fake_estimate_frame(frame, params)
+
+    monkeypatch.setattr(sf, 'estimate_frame', estimate)
+    monkeypatch.setattr(tr, 'Tracker', FakeTracker)
+
+
+def test_cli_json_plots_params(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                               capsys: pytest.CaptureFixture[str]) -> None:
+    seen: list[Any] = []
+    _patch_core(monkeypatch, seen)
+    write_bag(tmp_path / 'bags' / 'good', BagSpec(frames=5))
+    write_bag(tmp_path / 'bags' / 'noinfo', BagSpec(frames=5, info_every=0))
+    params = tmp_path / 'p.yaml'
+    params.write_text('endeff_node:\n  ros__parameters:\n    band_delta: 0.09\n')
+    out_json = tmp_path / 'report.json'
+    status = cli_main(['eval', str(tmp_path / 'bags'), '--json', str(out_json), '--plots',
+                       str(tmp_path / 'plots'), '--params', str(params)])
+    cap = capsys.readouterr()
+    assert status == 1  # one bag failed, the other was scored
+    report = json.loads(out_json.read_text(), parse_constant=lambda c: pytest.fail(c))
+    _check_spec_form(report)
+    assert [s['bag'] for s in report['sequences']] == ['good']
+    assert report['sequences'][0]['temporal']['recall'] == 1.0
+    assert 'noinfo' in report['failed'][0]['error']
+    assert 'FAILED' in cap.err and 'noinfo' in cap.err
+    assert 'good' in cap.out and 'overall' in cap.out
+    assert 'benchmark contract' in cap.err  # the topic choice is stated
+    assert seen and all(p.band_delta == 0.09 for p in seen)
+    assert report['params']['band_delta'] == 0.09
+    for name in ('per_frame_recall.png', 'summary_bars.png'):
+        assert (tmp_path / 'plots' / name).read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    assert cli_main(['eval', str(tmp_path / 'bags' / 'good')]) == 0
+
+
+def test_eval_does_not_import_rclpy(tmp_path: Path) -> None:
+    write_bag(tmp_path / 'b', BagSpec(frames=2))
+    code = (
+        'import sys\n'
+        f'sys.path.insert(0, {str(Path(__file__).parent)!r})\n'
+        'from bag_helpers import FakeTracker, fake_estimate_frame\n'
+        'from endeff_ros.evaluate import evaluate_bags\n'
+        f'r, _ = evaluate_bags([{str(tmp_path / "b")!r}], estimate_fn=fake_estimate_frame,\n'
+        '                      tracker_factory=FakeTracker)\n'
+        'assert r["sequences"][0]["frames"] == 2, r\n'
+        'bad = sorted(m for m in sys.modules if m.split(".")[0] in ("rclpy", "rosidl_parser",\n'
+        '             "sensor_msgs", "std_msgs", "visualization_msgs"))\n'
+        'assert not bad, bad\n')
+    subprocess.run([sys.executable, '-c', code], check=True, timeout=120)
+
+
+def test_parallel_jobs_same_result(tmp_path: Path) -> None:
+    for i in range(2):
+        write_bag(tmp_path / f's{i}', BagSpec(frames=4, storage=('mcap', 'sqlite3')[i]))
+    kw = dict(estimate_fn=fake_estimate_frame, tracker_factory=FakeTracker)
+    one, _ = evaluate_bags([tmp_path], jobs=1, **kw)
+    two, _ = evaluate_bags([tmp_path], jobs=2, **kw)
+    strip = [{k: v for k, v in s.items() if k != 'seconds'} for s in one['sequences']]
+    assert strip == [{k: v for k, v in s.items() if k != 'seconds'} for s in two['sequences']]
+
+
+@pytest.mark.usefixtures('real_core')
+def test_real_estimators_on_foreign_bag(tmp_path: Path) -> None:
+    """The real core on a bag this project did not write: runs, report in the spec's form."""
+    write_bag(tmp_path / 'blobs', bench_like_spec(frames=5))
+    report, _ = evaluate_bags([tmp_path / 'blobs'])
+    _check_spec_form(report)
+    seq = report['sequences'][0]
+    assert report['failed'] == [] and seq['frames'] == 5 and seq['scored_frames'] == 5
+    for m in ('temporal', 'single_frame'):
+        assert 0.0 <= seq[m]['recall'] <= 1.0 and 0.0 <= seq[m]['fpr'] <= 1.0
+
+
+@pytest.mark.usefixtures('real_core')
+def test_real_estimators_on_synth_bags(tmp_path: Path) -> None:
+    """``endeff synth --quick`` bags, both storages, scored by the real estimators."""
+    pytest.importorskip('endeff_ros.synth.cli', reason='endeff synth not present yet')
+    out = tmp_path / 'synth'
+    assert cli_main(['synth', '--out', str(out), '--quick']) == 0
+    names = ['jumping_jacks', 'star']
+    bags = [out / st / n for st in ('mcap', 'sqlite3') for n in names]
+    report, _ = evaluate_bags(bags)
+    _check_spec_form(report)
+    assert report['failed'] == []
+    assert len(report['sequences']) == 4
+    by = {s['bag']: s for s in report['sequences']}
+    for n in names:
+        a, b = by[f'mcap/{n}'], by[f'sqlite3/{n}']
+        assert a['scored_frames'] > 0 and a['frames'] == b['frames']
+        assert a['temporal'] == b['temporal']  # same content, either storage
+        assert not math.isnan(a['temporal']['recall'])
+    assert set(report['groups']) == {'no_occlusion', 'generic'}
