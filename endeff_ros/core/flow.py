@@ -55,7 +55,7 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, ParameterError
 
 if TYPE_CHECKING:
     import numpy.typing as npt
@@ -92,16 +92,18 @@ class FlowEstimator:
         smooth motion of body parts, about as accurate.
 
     The estimator holds one OpenCV algorithm object; it is not thread-safe. Thread count is
-    the caller's choice (``cv2.setNumThreads``).
+    the caller's choice (``cv2.setNumThreads``). A bad ``method`` or ``scale`` raises
+    :class:`.ParameterError`; unusable images raise :class:`.InputError`.
     """
 
     def __init__(self, method: str = 'dis', *, scale: float = 0.5) -> None:
         if method not in METHODS:
             msg = f'unknown optical flow method {method!r}; choose one of {", ".join(METHODS)}'
-            raise InputError(msg)
-        if not (isinstance(scale, (int, float)) and 0.0 < float(scale) <= 1.0):
+            raise ParameterError(msg)
+        if isinstance(scale, bool) or not (isinstance(scale, (int, float))
+                                           and 0.0 < float(scale) <= 1.0):
             msg = f'flow scale must be in (0, 1], got {scale!r}'
-            raise InputError(msg)
+            raise ParameterError(msg)
         self.method = method
         self.scale = float(scale)
         self._dis: Any = None
