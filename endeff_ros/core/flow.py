@@ -88,8 +88,8 @@ class FlowEstimator:
         slower presets; ``'farneback'`` is Farneback's polynomial expansion.
     scale:
         The flow is computed on grayscale images resized by this factor (0 < scale <= 1) and
-        the vectors are rescaled to full resolution. 0.5 is ~4x faster than 1.0 and, for the
-        smooth motion of body parts, about as accurate.
+        the vectors are rescaled to full resolution. 0.5 is 2-4x faster than 1.0 but loses
+        accuracy on large motions of small objects (measured in the module docstring).
 
     The estimator holds one OpenCV algorithm object; it is not thread-safe. Thread count is
     the caller's choice (``cv2.setNumThreads``). A bad ``method`` or ``scale`` raises
