@@ -136,6 +136,11 @@ def test_installed_endeff_script_prints_the_config(install: Path) -> None:
 @pytest.mark.slow
 def test_colcon_symlink_install(tmp_path: Path) -> None:
     """``colcon build --symlink-install`` (setup.py develop with script_dir) also works."""
+    from importlib.metadata import version
+
+    if int(version('setuptools').split('.')[0]) >= 80:
+        pytest.skip('setuptools >= 80 dropped `setup.py develop --editable`, which colcon '
+                    'uses for --symlink-install (colcon/colcon-core#696)')
     install_dir = _colcon_build(tmp_path, '--symlink-install')
     prefix = install_dir / PACKAGE
     for exe in ('endeff_node', 'endeff'):
