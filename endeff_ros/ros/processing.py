@@ -40,7 +40,7 @@ NODE_PARAMS: list[dict[str, Any]] = [
          'predict phase); false: depth and camera info only.', runtime=False),
     _row('sync_queue_size', 10, 'Approximate-time synchroniser: messages kept per input.',
          lo=1, hi=1000),
-    _row('sync_slop', 0.02, 'Approximate-time synchroniser: largest stamp difference between '
+    _row('sync_slop', 0.015, 'Approximate-time synchroniser: largest stamp difference between '
          'colour and depth of one set.', unit='s', lo=0.0, hi=1.0),
     _row('color_timeout', 0.1, 'A depth image still without a colour partner after this '
          'long is processed without colour (as the offline bag reader does).', unit='s',

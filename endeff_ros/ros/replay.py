@@ -1,0 +1,287 @@
+"""Replaying benchmark bags over DDS and collecting outputs (demo, latency benchmark, tests).
+
+:class:`BagSource` streams a bag's raw (CDR) camera messages in header-stamp order, with their
+original stamps, plus its ground truth; :class:`Replayer` publishes them (raw, no re-encoding);
+:class:`Collector` records every ``PointCloud2`` output per input stamp with its receipt time;
+:func:`replay` drives both, either in lock-step (each depth image is sent once the output for
+the previous one arrived: every frame is processed, as offline) or at a fixed rate (open loop:
+what a live camera does). Colour and depth send times are jittered.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import struct
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from endeff_ros.bag.reader import BagReader, ReaderOptions
+from endeff_ros.ros import convert
+
+KINDS = ('camera_info', 'color', 'depth')  # also the send priority at equal stamps
+TOPICS = {'color': 'color/image_raw', 'depth': 'depth/image_raw',
+          'camera_info': 'depth/camera_info'}
+
+
+def cdr_stamp(raw: bytes) -> int:
+    """``header.stamp`` in ns of a CDR-serialised message whose first field is a Header."""
+    order = '<' if raw[1] & 1 else '>'
+    sec, nanosec = struct.unpack_from(f'{order}iI', raw, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+@dataclass(frozen=True)
+class RawMessage:
+    """One camera message of a bag: input kind, header stamp, serialised bytes."""
+
+    kind: str
+    stamp_ns: int
+    raw: bytes
+
+
+class BagSource:
+    """A benchmark bag opened for replay (topics chosen as ``endeff eval`` chooses them)."""
+
+    def __init__(self, path: str | Path, options: ReaderOptions | None = None) -> None:
+        self.path = Path(path)
+        self.bag = BagReader(self.path, options)
+        self.bag.open()
+        sel = self.bag.selection
+        assert sel is not None
+        self.name = self.bag.name
+        self.topics = {'color': sel.color, 'depth': sel.depth, 'camera_info': sel.info}
+        self.gt_topic = sel.gt
+
+    def close(self) -> None:
+        self.bag.close()
+
+    def __enter__(self) -> BagSource:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _raw(self, topics: list[str]) -> Iterator[tuple[Any, bytes]]:
+        conns = [c for c in self.bag.reader.connections if c.topic in topics]
+        for conn, _, raw in self.bag.reader.messages(connections=conns):
+            yield conn, bytes(raw)
+
+    def ground_truth(self) -> dict[int, np.ndarray]:
+        """Depth stamp -> (N, 3) ground-truth positions (finite rows only)."""
+        out: dict[int, np.ndarray] = {}
+        if not self.gt_topic:
+            return out
+        for conn, raw in self._raw([self.gt_topic]):
+            msg = self.bag.reader.deserialize(raw, conn.msgtype)
+            pos = convert.xyz(convert.cloud_to_array(msg))
+            out[convert.stamp_to_ns(msg.header.stamp)] = pos[np.all(np.isfinite(pos), axis=1)]
+        return out
+
+    def depth_stamps(self) -> list[int]:
+        """Header stamps of all depth images, sorted."""
+        return sorted(cdr_stamp(raw) for _, raw in self._raw([self.topics['depth']]))
+
+    def messages(self, *, reorder_window_s: float = 1.0) -> Iterator[RawMessage]:
+        """Camera messages in header-stamp order (camera info, colour, depth at equal stamps)."""
+        kind_of = {topic: kind for kind, topic in self.topics.items()}
+        window = round(reorder_window_s * 1e9)
+        heap: list[tuple[int, int, int, RawMessage]] = []
+        counter = itertools.count()
+        newest = None
+        for conn, raw in self._raw(list(self.topics.values())):
+            kind = kind_of[conn.topic]
+            item = RawMessage(kind, cdr_stamp(raw), raw)
+            heapq.heappush(heap, (item.stamp_ns, KINDS.index(kind), next(counter), item))
+            newest = item.stamp_ns if newest is None else max(newest, item.stamp_ns)
+            while heap and newest - heap[0][0] > window:
+                yield heapq.heappop(heap)[3]
+        while heap:
+            yield heapq.heappop(heap)[3]
+
+
+def jittered(messages: Iterator[RawMessage], jitter_s: float,
+             seed: int = 0) -> Iterator[tuple[int, RawMessage]]:
+    """(send key ns, message): images delayed by up to ``jitter_s``, re-ordered by send key."""
+    rng = np.random.default_rng(seed)
+    jitter_ns = round(jitter_s * 1e9)
+    heap: list[tuple[int, int, RawMessage]] = []
+    counter = itertools.count()
+    for msg in messages:
+        delay = int(rng.integers(0, jitter_ns + 1)) if msg.kind != 'camera_info' else 0
+        heapq.heappush(heap, (msg.stamp_ns + delay, next(counter), msg))
+        while heap and heap[0][0] <= msg.stamp_ns:  # later messages have later keys
+            key, _, m = heapq.heappop(heap)
+            yield key, m
+    while heap:
+        key, _, m = heapq.heappop(heap)
+        yield key, m
+
+
+class Replayer:
+    """Raw publishers of the three camera inputs under ``namespace`` (reliable QoS)."""
+
+    def __init__(self, node: Any, namespace: str = '/camera') -> None:
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from sensor_msgs.msg import CameraInfo, Image
+
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        ns = namespace.rstrip('/')
+        self.pubs = {kind: node.create_publisher(CameraInfo if kind == 'camera_info' else Image,
+                                                 f'{ns}/{topic}', qos)
+                     for kind, topic in TOPICS.items()}
+        self.sent: dict[int, int] = {}  # depth stamp -> perf_counter_ns at publish
+
+    def matched(self, depth_subscribers: int = 1) -> bool:
+        """Every input has a subscriber; depth has at least ``depth_subscribers``."""
+        return (all(p.get_subscription_count() > 0 for p in self.pubs.values()) and
+                self.pubs['depth'].get_subscription_count() >= depth_subscribers)
+
+    def publish(self, msg: RawMessage) -> None:
+        if msg.kind == 'depth':
+            self.sent[msg.stamp_ns] = time.perf_counter_ns()
+        self.pubs[msg.kind].publish(msg.raw)
+
+
+@dataclass
+class Output:
+    """One received cloud: receipt time (perf_counter ns), frame_id and points."""
+
+    receipt_ns: int
+    frame_id: str
+    points: np.ndarray
+
+
+@dataclass
+class Collector:
+    """Subscribes to ``PointCloud2`` outputs (name -> topic) and records them per stamp."""
+
+    node: Any
+    topics: dict[str, str]
+    markers_topic: str | None = None
+    clouds: dict[str, dict[int, Output]] = field(default_factory=dict)
+    duplicates: dict[str, int] = field(default_factory=dict)
+    markers: dict[int, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from sensor_msgs.msg import PointCloud2
+        from visualization_msgs.msg import MarkerArray
+
+        qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+        for name, topic in self.topics.items():
+            self.clouds[name] = {}
+            self.duplicates[name] = 0
+            self.node.create_subscription(PointCloud2, topic,
+                                          lambda m, n=name: self._on_cloud(n, m), qos)
+        if self.markers_topic:
+            self.node.create_subscription(MarkerArray, self.markers_topic, self._on_markers,
+                                          qos)
+
+    def _on_cloud(self, name: str, msg: Any) -> None:
+        now = time.perf_counter_ns()
+        stamp = convert.stamp_to_ns(msg.header.stamp)
+        if stamp in self.clouds[name]:
+            self.duplicates[name] += 1
+            return
+        self.clouds[name][stamp] = Output(now, msg.header.frame_id, convert.cloud_to_array(msg))
+
+    def _on_markers(self, msg: Any) -> None:
+        if msg.markers:
+            self.markers[convert.stamp_to_ns(msg.markers[0].header.stamp)] = msg
+
+    def matched(self) -> bool:
+        """Every output topic has a publisher."""
+        return all(self.node.count_publishers(t) > 0 for t in self.topics.values())
+
+
+def spin_for(executor: Any, seconds: float) -> None:
+    """Spin in bounded steps for ``seconds`` (callbacks keep running)."""
+    end = time.monotonic() + seconds
+    while True:
+        left = end - time.monotonic()
+        if left <= 0:
+            return
+        executor.spin_once(timeout_sec=min(left, 0.005))
+
+
+def spin_until(executor: Any, condition: Any, timeout: float) -> bool:
+    """Spin until ``condition()`` or ``timeout`` s; returns whether it became true."""
+    end = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > end:
+            return False
+        executor.spin_once(timeout_sec=0.01)
+    return True
+
+
+@dataclass
+class ReplayStats:
+    """What a replay sent and how long it took."""
+
+    depth_sent: list[int] = field(default_factory=list)
+    messages: int = 0
+    waited_out: int = 0  # lock-step: outputs that never came within the timeout
+    seconds: float = 0.0
+
+
+def replay(executor: Any, source: BagSource, replayer: Replayer, *,
+           collector: Collector | None = None, wait_on: str = 'node',
+           rate_hz: float | None = None, jitter_s: float = 0.008,
+           frame_timeout_s: float = 10.0, max_frames: int | None = None,
+           seed: int = 0) -> ReplayStats:
+    """Publish ``source`` through ``replayer``.
+
+    Lock-step (``rate_hz=None``): before each depth image, wait (up to ``frame_timeout_s``)
+    for ``collector``'s ``wait_on`` output of the previous one. Fixed rate: message times
+    follow the header stamps, scaled so that depth images come at ``rate_hz``.
+    """
+    stats = ReplayStats()
+    t_start = time.monotonic()
+    scale = None
+    if rate_hz is not None:
+        stamps = source.depth_stamps()
+        period = float(np.median(np.diff(stamps))) if len(stamps) > 1 else 1e9 / rate_hz
+        scale = (1e9 / rate_hz) / period
+    t0 = key0 = None
+    for key, msg in jittered(source.messages(), jitter_s, seed):
+        if msg.kind == 'depth':
+            if max_frames is not None and len(stats.depth_sent) >= max_frames:
+                break
+            if scale is None and stats.depth_sent and collector is not None:
+                prev = stats.depth_sent[-1]
+                if not spin_until(executor, lambda p=prev: p in collector.clouds[wait_on],
+                                  frame_timeout_s):
+                    stats.waited_out += 1
+        if scale is not None:
+            if t0 is None:
+                t0, key0 = time.monotonic(), key
+            spin_for(executor, t0 + (key - key0) * scale / 1e9 - time.monotonic())
+        elif msg.kind != 'camera_info':
+            spin_for(executor, float(np.random.default_rng(key).uniform(0, jitter_s)))
+        replayer.publish(msg)
+        stats.messages += 1
+        if msg.kind == 'depth':
+            stats.depth_sent.append(msg.stamp_ns)
+        executor.spin_once(timeout_sec=0)
+    stats.seconds = time.monotonic() - t_start
+    return stats
+
+
+def latency_summary(sent: dict[int, int], outputs: dict[int, Output],
+                    stamps: list[int]) -> dict[str, Any]:
+    """Delivered count, dropped frames and end-to-end latency percentiles (ms) of one output."""
+    lat = np.array([(outputs[s].receipt_ns - sent[s]) / 1e6 for s in stamps if s in outputs],
+                   dtype=np.float64)
+    out: dict[str, Any] = {'frames_sent': len(stamps), 'outputs': int(lat.size),
+                           'dropped_frames': len(stamps) - int(lat.size)}
+    if lat.size:
+        p50, p95, p99 = np.percentile(lat, [50, 95, 99])
+        out.update(latency_ms_p50=round(float(p50), 3), latency_ms_p95=round(float(p95), 3),
+                   latency_ms_p99=round(float(p99), 3), latency_ms_max=round(float(lat.max()), 3))
+    return out

@@ -1,0 +1,199 @@
+"""One replay session over DDS, every participant in its own process.
+
+``run_session(bag)`` starts ``endeff_node`` (and optionally the relay) and a driver process that
+replays the bag (:mod:`endeff_ros.ros.replay`) and collects the outputs, all with the same
+environment (Fast DDS, the SHM profile unless ``profile=False``, a private ROS domain). The
+driver writes a JSON record; ``run_session`` returns it as a dict::
+
+    {'bag', 'frame_id', 'depth_sent': [stamp, ...], 'waited_out', 'replay_seconds',
+     'outputs': {'node': {stamp: {'frame_id', 'latency_ms', 'x', 'y', 'z', 'id', 'state'}},
+                 'relay': {...}},
+     'duplicates': {'node': 0, ...}, 'markers': {stamp: [[id, x, y, z], ...]},
+     'latency': {'node': {...}, 'relay': {...}}, 'diagnostics': {key: value}}
+
+Stamps are integers (nanoseconds). The driver is ``python -m endeff_ros.ros.session``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from endeff_ros.ros.procs import ros_env, start, stop
+
+
+def _node_args(namespace: str, params: dict[str, Any]) -> list[str]:
+    args = ['--ros-args', '-r', f'__ns:={namespace}']
+    for key, value in params.items():
+        text = str(value).lower() if isinstance(value, bool) else str(value)
+        args += ['-p', f'{key}:={text}']
+    return args
+
+
+def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = False,
+                profile: bool = True, node_params: dict[str, Any] | None = None,
+                namespace: str = '/camera', domain_id: int | None = None,
+                max_frames: int | None = None, jitter_s: float = 0.008,
+                frame_timeout_s: float = 20.0, timeout_s: float = 1800.0) -> dict[str, Any]:
+    """Replay ``bag`` to a fresh ``endeff_node`` process and return the collected record.
+
+    ``rate_hz=None`` replays in lock-step (every frame processed); otherwise at that rate.
+    Every child process is stopped (SIGINT, then harder) before returning.
+    """
+    if domain_id is None:
+        domain_id = 100 + os.getpid() % 100
+    env = ros_env(profile=profile, domain_id=domain_id)
+    with tempfile.TemporaryDirectory(prefix='endeff_session_') as tmp:
+        out = Path(tmp) / 'record.json'
+        logs = {name: open(Path(tmp) / f'{name}.log', 'w+', encoding='utf-8')  # noqa: SIM115
+                for name in ('node', 'relay', 'driver')}
+        procs: list[subprocess.Popen] = []
+        try:
+            procs.append(start(['-m', 'endeff_ros.ros.node',
+                                *_node_args(namespace, node_params or {})], env,
+                               stdout=logs['node'], stderr=subprocess.STDOUT))
+            if relay:
+                procs.append(start(['-m', 'endeff_ros.ros.relay',
+                                    *_node_args(namespace, {})], env,
+                                   stdout=logs['relay'], stderr=subprocess.STDOUT))
+            driver = ['-m', 'endeff_ros.ros.session', '--bag', str(bag), '--out', str(out),
+                      '--namespace', namespace, '--jitter', str(jitter_s),
+                      '--frame-timeout', str(frame_timeout_s)]
+            if rate_hz is not None:
+                driver += ['--rate', str(rate_hz)]
+            if relay:
+                driver += ['--relay']
+            if max_frames is not None:
+                driver += ['--max-frames', str(max_frames)]
+            proc = start(driver, env, stdout=logs['driver'], stderr=subprocess.STDOUT)
+            procs.append(proc)
+            try:
+                proc.wait(timeout=timeout_s)
+            except subprocess.TimeoutExpired:
+                pass
+        finally:
+            for p in reversed(procs):
+                stop(p)
+        text = {}
+        for name, fh in logs.items():
+            fh.seek(0)
+            text[name] = fh.read()[-4000:]
+            fh.close()
+        if not out.is_file():
+            msg = (f'replay session for {bag} produced no record.\n--- driver log ---\n'
+                   f'{text["driver"]}\n--- node log ---\n{text["node"]}')
+            raise RuntimeError(msg)
+        record = json.loads(out.read_text(encoding='utf-8'))
+    record['logs'] = text
+    for key in ('outputs', 'markers'):
+        record[key] = _int_keys(record.get(key, {}))
+    return record
+
+
+def _int_keys(d: dict[str, Any]) -> dict[Any, Any]:
+    out: dict[Any, Any] = {}
+    for k, v in d.items():
+        key = int(k) if k.lstrip('-').isdigit() else k
+        out[key] = _int_keys(v) if isinstance(v, dict) and key == k else v
+    return out
+
+
+# -------------------------------------------------------------------------------- driver
+def _driver(args: argparse.Namespace) -> int:
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+
+    from endeff_ros.ros.replay import (
+        BagSource,
+        Collector,
+        Replayer,
+        latency_summary,
+        replay,
+        spin_for,
+        spin_until,
+    )
+
+    rclpy.init()
+    node = rclpy.create_node('endeff_replay')
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    ns = args.namespace.rstrip('/')
+    topics = {'node': f'{ns}/end_effectors'}
+    if args.relay:
+        topics['relay'] = f'{ns}/relay/end_effectors'
+    diagnostics: dict[str, str] = {}
+
+    def on_diag(msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if 'endeff_node' in status.name:
+                diagnostics.clear()
+                diagnostics.update({v.key: v.value for v in status.values})
+
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
+    record: dict[str, Any] = {'bag': str(args.bag)}
+    with BagSource(args.bag) as source:
+        replayer = Replayer(node, ns)
+        collector = Collector(node, topics, markers_topic=f'{ns}/end_effectors/markers')
+        if not spin_until(executor, lambda: replayer.matched(1 + args.relay) and
+                          collector.matched(), 90.0):
+            print('endeff_node (or the relay) never appeared on DDS', file=sys.stderr)
+            return 1
+        spin_for(executor, 0.5)
+        stats = replay(executor, source, replayer, collector=collector, rate_hz=args.rate,
+                       jitter_s=args.jitter, frame_timeout_s=args.frame_timeout,
+                       max_frames=args.max_frames)
+        sent = stats.depth_sent
+        spin_until(executor, lambda: all(s in collector.clouds[n] for n in topics
+                                         for s in sent), 5.0 if args.rate else 30.0)
+        spin_for(executor, 1.5)  # trailing markers and a last diagnostics message
+        record.update(depth_sent=sent, waited_out=stats.waited_out,
+                      replay_seconds=stats.seconds, duplicates=collector.duplicates,
+                      diagnostics=diagnostics)
+        record['outputs'] = {name: {str(s): {
+            'frame_id': o.frame_id, 'latency_ms': (o.receipt_ns - replayer.sent[s]) / 1e6
+            if s in replayer.sent else None,
+            **{f: o.points[f].tolist() for f in ('x', 'y', 'z', 'id', 'state')
+               if f in (o.points.dtype.names or ())}}
+            for s, o in clouds.items()} for name, clouds in collector.clouds.items()}
+        record['latency'] = {name: latency_summary(replayer.sent, collector.clouds[name], sent)
+                             for name in topics}
+        record['markers'] = {str(s): [[m.id, m.pose.position.x, m.pose.position.y,
+                                       m.pose.position.z] for m in arr.markers
+                                      if m.ns == 'end_effectors' and m.action == 0]
+                             for s, arr in collector.markers.items()}
+    Path(args.out).write_text(json.dumps(record), encoding='utf-8')
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description='Replay driver of run_session (internal).')
+    parser.add_argument('--bag', required=True)
+    parser.add_argument('--out', required=True)
+    parser.add_argument('--namespace', default='/camera')
+    parser.add_argument('--rate', type=float, default=None)
+    parser.add_argument('--relay', action='store_true')
+    parser.add_argument('--jitter', type=float, default=0.008)
+    parser.add_argument('--frame-timeout', type=float, default=20.0)
+    parser.add_argument('--max-frames', type=int, default=None)
+    args = parser.parse_args(argv)
+    t0 = time.monotonic()
+    try:
+        return _driver(args)
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        print(f'driver finished after {time.monotonic() - t0:.1f} s', file=sys.stderr)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
