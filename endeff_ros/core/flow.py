@@ -32,8 +32,10 @@ farneback      1.0    0.19      3.49      24.84      68.46    0.17 0.38 0.95 3.9
 farneback      0.5    0.20      3.73      25.06      23.59    0.28 0.66 1.31 4.20 12.18
 =============  =====  ========  ========  =========  =======  ===============================
 
-(Python 3.11, OpenCV 5.0.0, 2-core VM shared with other jobs: times vary by ~0.5 ms run to run;
-an earlier run gave 1.72 ms for dis_ultrafast at 0.5 and 2.55 ms for dis_fast at 0.5.)
+(Python 3.11, OpenCV 5.0.0, 2-core VM shared with other jobs: times vary by ~0.5 ms run to run
+on an idle machine; an earlier run gave 1.72 ms for dis_ultrafast at 0.5 and 2.55 ms for
+dis_fast at 0.5. A later run with the machine loaded by other jobs scaled every time by 1.5-3x
+(dis_ultrafast 0.5: 3.3 ms, dis_fast 0.5: 7.5 ms) with the same ranking. EPE is deterministic.)
 
 Decision. The flow budget in the full pipeline is about 3 ms per frame on one core (pipeline
 <= 12 ms). Farneback is out (17-68 ms, and it loses large motions: 12 px error at 25 px).
