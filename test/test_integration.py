@@ -1,0 +1,94 @@
+"""End to end over DDS: a synthetic bag replayed to endeff_node in its own process.
+
+The node runs as a subprocess with the Fast DDS SHM profile; a driver process replays the bag
+(original stamps, jittered colour/depth send times, lock-step) and a subscriber node in it
+collects the outputs (:func:`endeff_ros.ros.session.run_session`). Checked: one cloud per depth
+image with its stamp and frame_id, markers equal to the cloud, and recall equal (within 0.02) to
+the offline evaluation of the same bag.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+if importlib.util.find_spec('endeff_ros.synth') is None:  # pragma: no cover
+    pytest.skip('endeff_ros.synth (synthetic benchmark bags) is not available yet',
+                allow_module_level=True)
+
+SEQUENCE = 'jumping_jacks'
+
+
+@pytest.fixture(scope='module')
+def bag(tmp_path_factory):
+    from endeff_ros.synth.cli import generate_one
+
+    out = tmp_path_factory.mktemp('synth')
+    generate_one(SEQUENCE, out, ['mcap'], True, 0)
+    return out / 'mcap' / SEQUENCE
+
+
+@pytest.fixture(scope='module')
+def record(bag):
+    from endeff_ros.ros.session import run_session
+
+    return run_session(bag, timeout_s=240.0, frame_timeout_s=20.0)
+
+
+def _depth_frame_id(bag) -> str:
+    from endeff_ros.ros.replay import BagSource
+
+    with BagSource(bag) as source:
+        conns = [c for c in source.bag.reader.connections if c.topic == source.topics['depth']]
+        _, _, raw = next(iter(source.bag.reader.messages(connections=conns)))
+        return source.bag.reader.deserialize(raw, conns[0].msgtype).header.frame_id
+
+
+def test_one_cloud_per_depth_frame_with_its_stamp_and_frame(bag, record):
+    from endeff_ros.ros.replay import BagSource
+
+    with BagSource(bag) as source:
+        stamps = source.depth_stamps()
+    assert record['depth_sent'] == stamps, record['logs']['driver']
+    clouds = record['outputs']['node']
+    assert sorted(clouds) == stamps, record['logs']['node']
+    assert record['duplicates']['node'] == 0
+    frame_id = _depth_frame_id(bag)
+    assert {c['frame_id'] for c in clouds.values()} == {frame_id}
+    assert any(len(c['x']) for c in clouds.values()), 'the node found no end-effector at all'
+
+
+def test_markers_match_cloud(record):
+    clouds = record['outputs']['node']
+    assert set(record['markers']) == set(clouds)
+    for stamp, cloud in clouds.items():
+        spheres = sorted(record['markers'][stamp])
+        rows = sorted([int(i), x, y, z] for i, x, y, z in zip(cloud['id'], cloud['x'],
+                                                             cloud['y'], cloud['z']))
+        assert [s[0] for s in spheres] == [r[0] for r in rows]
+        np.testing.assert_allclose(np.array(spheres)[:, 1:] if spheres else np.zeros((0, 3)),
+                                   np.array(rows)[:, 1:] if rows else np.zeros((0, 3)),
+                                   atol=1e-5)
+
+
+def test_recall_equals_offline_evaluation(bag, record):
+    from endeff_ros.evaluate import evaluate_bag
+    from endeff_ros.ros.replay import BagSource
+    from endeff_ros.scoring import SequenceScorer
+
+    with BagSource(bag) as source:
+        gt = source.ground_truth()
+    scorer = SequenceScorer()
+    for stamp in record['depth_sent']:
+        cloud = record['outputs']['node'].get(stamp)
+        est = (np.stack([cloud['x'], cloud['y'], cloud['z']], axis=1) if cloud and cloud['x']
+               else np.zeros((0, 3)))
+        scorer.add(est, gt.get(stamp))
+    online = scorer.result().recall
+    offline = evaluate_bag(bag).score('temporal').recall
+    assert scorer.scored_frames > 0
+    assert abs(online - offline) <= 0.02, (online, offline)
