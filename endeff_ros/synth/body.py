@@ -104,7 +104,6 @@ class PersonStyle:
     trousers: Color = (0.22, 0.22, 0.30)
     skin: Color = (0.85, 0.65, 0.52)
     shoes: Color = (0.30, 0.18, 0.10)
-    hair: Color = (0.25, 0.16, 0.08)
 
 
 @dataclass(frozen=True)
@@ -206,9 +205,6 @@ class PersonModel:
         head_c = neck + head_rot @ np.array([0, 0.17 * s, 0.01 * s])
         add('head', ellipsoid(head_c, head_rot, np.array([0.078, 0.11, 0.095]) * s, st.skin,
                               tex + 6, 'head'))
-        add('hair', ellipsoid(head_c + head_rot @ np.array([0, 0.025 * s, -0.012 * s]), head_rot,
-                              np.array([0.080, 0.095, 0.09]) * s, st.hair, tex + 7, 'hair'))
-
         for side, name, hand, pole in ((1, 'l', pose.hand_l, pose.elbow_l),
                                        (-1, 'r', pose.hand_r, pose.elbow_r)):
             sh = sh_l if side > 0 else sh_r

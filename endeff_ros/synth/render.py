@@ -18,6 +18,7 @@ from .body import Entity
 from .shapes import Primitive, Vec
 
 FLOOR, WALL, NOTHING = -2, -3, -1
+HAIR = np.array([0.25, 0.16, 0.08])
 
 
 @dataclass(frozen=True)
@@ -208,7 +209,11 @@ def _body_texture(p: Primitive, q: Vec) -> Vec:
     chk = (np.floor(q / cell).sum(1) % 2).astype(np.float64)
     stripe = 0.5 + 0.5 * np.sin(2 * np.pi * (q @ k) + phase)
     mix = (0.35 * chk + 0.35 * stripe)[:, None]
-    return base * (1 - mix) + alt * mix
+    rgb = base * (1 - mix) + alt * mix
+    if p.part == 'head':  # hair on the top and back of the head
+        hair = (q[:, 1] > 0.045) | ((q[:, 2] < -0.02) & (q[:, 1] > -0.07))
+        rgb[hair] = HAIR * (0.8 + 0.4 * stripe[hair, None])
+    return rgb
 
 
 def _floor_texture(pf: Vec) -> Vec:

@@ -28,8 +28,8 @@ from .render import Rendered, background
 
 NOISE_K = 1.5e-3  # sigma_z = NOISE_K * z^2 (m)
 QUANT_K = 2.85e-3  # depth step = QUANT_K * z^2 (m)
-GRAZING_SOFT = np.deg2rad(66.0)
-GRAZING_HARD = np.deg2rad(79.0)
+GRAZING_SOFT = np.deg2rad(72.0)
+GRAZING_HARD = np.deg2rad(82.0)
 FLYING_RATE = 0.22  # fraction of silhouette pixels that become flying pixels
 HOLE_RATE = 4e-4  # random 3x3 holes per pixel
 Z_MIN, Z_MAX = 0.4, 8.0
