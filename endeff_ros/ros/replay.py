@@ -36,6 +36,14 @@ def cdr_stamp(raw: bytes) -> int:
     return sec * 1_000_000_000 + nanosec
 
 
+def restamp(raw: bytes, stamp_ns: int) -> bytes:
+    """Copy of a CDR message (Header first) with ``header.stamp`` set to ``stamp_ns``."""
+    order = '<' if raw[1] & 1 else '>'
+    out = bytearray(raw)
+    struct.pack_into(f'{order}iI', out, 4, *divmod(int(stamp_ns), 1_000_000_000))
+    return bytes(out)
+
+
 @dataclass(frozen=True)
 class RawMessage:
     """One camera message of a bag: input kind, header stamp, serialised bytes."""
@@ -86,6 +94,19 @@ class BagSource:
     def depth_stamps(self) -> list[int]:
         """Header stamps of all depth images, sorted."""
         return sorted(cdr_stamp(raw) for _, raw in self._raw([self.topics['depth']]))
+
+    def looped(self, loops: int) -> Iterator[RawMessage]:
+        """:meth:`messages` ``loops`` times, later passes re-stamped to keep time increasing."""
+        stamps = self.depth_stamps() if loops > 1 else [0]
+        period = int(np.median(np.diff(stamps))) if len(stamps) > 1 else 0
+        span = stamps[-1] - stamps[0] + period
+        for loop in range(loops):
+            for msg in self.messages():
+                if loop == 0:
+                    yield msg
+                else:
+                    stamp = msg.stamp_ns + loop * span
+                    yield RawMessage(msg.kind, stamp, restamp(msg.raw, stamp))
 
     def messages(self, *, reorder_window_s: float = 1.0) -> Iterator[RawMessage]:
         """Camera messages in header-stamp order (camera info, colour, depth at equal stamps)."""
@@ -234,12 +255,13 @@ def replay(executor: Any, source: BagSource, replayer: Replayer, *,
            collector: Collector | None = None, wait_on: str = 'node',
            rate_hz: float | None = None, jitter_s: float = 0.008,
            frame_timeout_s: float = 10.0, max_frames: int | None = None,
-           seed: int = 0) -> ReplayStats:
+           loops: int = 1, seed: int = 0) -> ReplayStats:
     """Publish ``source`` through ``replayer``.
 
     Lock-step (``rate_hz=None``): before each depth image, wait (up to ``frame_timeout_s``)
     for ``collector``'s ``wait_on`` output of the previous one. Fixed rate: message times
-    follow the header stamps, scaled so that depth images come at ``rate_hz``.
+    follow the header stamps, scaled so that depth images come at ``rate_hz``. ``loops`` > 1
+    replays the bag again and again with shifted stamps (longer benchmarks).
     """
     stats = ReplayStats()
     t_start = time.monotonic()
@@ -249,7 +271,7 @@ def replay(executor: Any, source: BagSource, replayer: Replayer, *,
         period = float(np.median(np.diff(stamps))) if len(stamps) > 1 else 1e9 / rate_hz
         scale = (1e9 / rate_hz) / period
     t0 = key0 = None
-    for key, msg in jittered(source.messages(), jitter_s, seed):
+    for key, msg in jittered(source.looped(loops), jitter_s, seed):
         if msg.kind == 'depth':
             if max_frames is not None and len(stats.depth_sent) >= max_frames:
                 break

@@ -40,11 +40,12 @@ def _node_args(namespace: str, params: dict[str, Any]) -> list[str]:
 def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = False,
                 profile: bool = True, node_params: dict[str, Any] | None = None,
                 namespace: str = '/camera', domain_id: int | None = None,
-                max_frames: int | None = None, jitter_s: float = 0.008,
+                max_frames: int | None = None, loops: int = 1, jitter_s: float = 0.008,
                 frame_timeout_s: float = 20.0, timeout_s: float = 1800.0) -> dict[str, Any]:
     """Replay ``bag`` to a fresh ``endeff_node`` process and return the collected record.
 
     ``rate_hz=None`` replays in lock-step (every frame processed); otherwise at that rate.
+    ``loops`` replays the bag that many times (re-stamped, see :meth:`BagSource.looped`).
     Every child process is stopped (SIGINT, then harder) before returning.
     """
     if domain_id is None:
@@ -72,6 +73,8 @@ def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = 
                 driver += ['--relay']
             if max_frames is not None:
                 driver += ['--max-frames', str(max_frames)]
+            if loops > 1:
+                driver += ['--loops', str(loops)]
             proc = start(driver, env, stdout=logs['driver'], stderr=subprocess.STDOUT)
             procs.append(proc)
             try:
@@ -149,7 +152,7 @@ def _driver(args: argparse.Namespace) -> int:
         spin_for(executor, 0.5)
         stats = replay(executor, source, replayer, collector=collector, rate_hz=args.rate,
                        jitter_s=args.jitter, frame_timeout_s=args.frame_timeout,
-                       max_frames=args.max_frames)
+                       max_frames=args.max_frames, loops=args.loops)
         sent = stats.depth_sent
         spin_until(executor, lambda: all(s in collector.clouds[n] for n in topics
                                          for s in sent), 5.0 if args.rate else 30.0)
@@ -185,6 +188,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--jitter', type=float, default=0.008)
     parser.add_argument('--frame-timeout', type=float, default=20.0)
     parser.add_argument('--max-frames', type=int, default=None)
+    parser.add_argument('--loops', type=int, default=1)
     args = parser.parse_args(argv)
     t0 = time.monotonic()
     try:

@@ -1,0 +1,82 @@
+"""End-to-end latency of endeff_node over DDS, against a trivial relay in the same run.
+
+A synthetic (or any benchmark) bag is replayed at a fixed rate (30 Hz by default, open loop, as
+a live camera would send it) to ``endeff_node`` and to :mod:`endeff_ros.ros.relay`, each in its
+own process with the Fast DDS SHM profile. Latency is measured from the publication of each
+depth image to the receipt of the output stamped with it (same clock, the driver process);
+frames without an output are counted as dropped (the node skips frames it is too slow for).
+
+    python -m endeff_ros.ros.latency_bench [--bag BAG] [--rate 30] [--loops 3] [--no-profile]
+
+``ros_latency_bench()`` is what ``endeff bench --ros`` calls; it returns the JSON-ready dict.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+DEFAULT_SEQUENCE = 'jumping_jacks'
+
+
+def _default_bag(tmp: Path) -> Path:
+    """``data/synth/mcap/<sequence>`` if generated, else a full-length synthetic bag in ``tmp``."""
+    here = Path(__file__).resolve().parents[2] / 'data' / 'synth' / 'mcap' / DEFAULT_SEQUENCE
+    if (here / 'metadata.yaml').is_file():
+        return here
+    from endeff_ros.synth.cli import generate_one
+
+    generate_one(DEFAULT_SEQUENCE, tmp, ['mcap'], False, 0)
+    return tmp / 'mcap' / DEFAULT_SEQUENCE
+
+
+def ros_latency_bench(bag: str | Path | None = None, *, rate_hz: float = 30.0,
+                      loops: int = 3, profile: bool = True,
+                      max_frames: int | None = None) -> dict[str, Any]:
+    """Replay ``bag`` (default: a synthetic sequence) at ``rate_hz``; node vs relay latency.
+
+    Returns ``{'bag', 'rate_hz', 'fastdds_profile', 'node': {...}, 'relay': {...},
+    'node_diagnostics': {...}}`` where node and relay hold ``frames_sent``, ``outputs``,
+    ``dropped_frames`` and ``latency_ms_p50/p95/p99/max``.
+    """
+    from endeff_ros.ros.session import run_session
+
+    with tempfile.TemporaryDirectory(prefix='endeff_bench_') as tmp:
+        path = Path(bag) if bag is not None else _default_bag(Path(tmp))
+        record = run_session(path, rate_hz=rate_hz, relay=True, profile=profile,
+                             max_frames=max_frames, loops=loops, frame_timeout_s=5.0)
+    diag = record.get('diagnostics', {})
+    keys = ('processed', 'skipped', 'colorless', 'dropped_unpaired.color',
+            'dropped_unpaired.depth', 'processing_ms.p50', 'processing_ms.p95',
+            'processing_ms.p99')
+    return {'bag': str(path), 'rate_hz': rate_hz, 'loops': loops,
+            'fastdds_profile': profile, 'node': record['latency']['node'],
+            'relay': record['latency']['relay'],
+            'node_diagnostics': {k: diag[k] for k in keys if k in diag}}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--bag', help='benchmark bag (default: a synthetic sequence)')
+    parser.add_argument('--rate', type=float, default=30.0, help='depth images per second')
+    parser.add_argument('--loops', type=int, default=3, help='replay the bag this many times')
+    parser.add_argument('--max-frames', type=int, default=None)
+    parser.add_argument('--no-profile', action='store_true',
+                        help='run without the Fast DDS SHM profile (for comparison)')
+    parser.add_argument('--json', help='also write the result to this file')
+    args = parser.parse_args(argv)
+    result = ros_latency_bench(args.bag, rate_hz=args.rate, loops=args.loops,
+                               profile=not args.no_profile, max_frames=args.max_frames)
+    text = json.dumps(result, indent=2)
+    print(text)
+    if args.json:
+        Path(args.json).write_text(text + '\n', encoding='utf-8')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
