@@ -221,3 +221,22 @@ def test_process_equals_direct_tracker_real_core(tmp_path: Path) -> None:
     assert sorted(got) == sorted(direct)
     for stamp, want in direct.items():
         np.testing.assert_allclose(got[stamp], want, atol=1e-5)  # float32 in the cloud
+
+
+def test_synth_bags_both_storages(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``endeff synth --quick`` bags (mcap and sqlite3) through ``endeff process``."""
+    pytest.importorskip('endeff_ros.synth.cli', reason='endeff synth not present yet')
+    _fake_tracker_everywhere(monkeypatch)
+    data = tmp_path / 'synth'
+    assert cli_main(['synth', '--out', str(data), '--quick', '--only', 'waving_one_hand']) == 0
+    ins = [data / 'mcap' / 'waving_one_hand', data / 'sqlite3' / 'waving_one_hand']
+    outs = [tmp_path / 'out_mcap', tmp_path / 'out_sqlite3']
+    for i, o in zip(ins, outs, strict=True):
+        assert cli_main(['process', str(i), '-o', str(o)]) == 0
+    stamps = [frame.stamp_ns for frame, _ in read_frames(ins[0])]
+    assert stamps == [frame.stamp_ns for frame, _ in read_frames(ins[1])]
+    for o in outs:
+        for msgs in (_rosbags_messages(o), _mcap_messages(o)):
+            clouds = [m for t, _, _, m in msgs if t == OUTPUT_CLOUD]
+            assert [convert.stamp_to_ns(m.header.stamp) for m in clouds] == stamps
+            assert all(m.header.frame_id.endswith('optical_frame') for m in clouds)
