@@ -56,6 +56,7 @@ class BagSpec:
     drop_color: set[int] = field(default_factory=set)
     drop_depth: set[int] = field(default_factory=set)
     info_every: int = 1  # camera info every n-th frame (0: never)
+    info_start: int = 0  # no camera info before this frame
     color_offset_ns: int = 4_000_000  # colour stamp = depth stamp + this (real drivers)
     log_delay_ns: int = 7_000_000  # log time = stamp + this; colour written after depth
     shuffle_log: bool = False  # write messages in a scrambled log order
@@ -168,7 +169,7 @@ def write_bag(path: Path, spec: BagSpec | None = None) -> dict[int, np.ndarray]:
     for i in range(spec.frames):
         stamp = START_NS + i * PERIOD_NS
         log = stamp + spec.log_delay_ns
-        if spec.info_every and i % spec.info_every == 0:
+        if spec.info_every and i % spec.info_every == 0 and i >= spec.info_start:
             rows.append((log, spec.topics['info'], 'sensor_msgs/msg/CameraInfo',
                          info_msg(spec, stamp)))
         if i not in spec.drop_depth:

@@ -102,6 +102,34 @@ def test_colour_beyond_slop_is_not_paired(tmp_path: Path) -> None:
     assert len(recs) == 5 and sum(r.frame.color is not None for r in recs) >= 4
 
 
+def test_colour_stream_stops_memory_stays_bounded(tmp_path: Path) -> None:
+    write_bag(tmp_path / 'bag', BagSpec(frames=80, width=16, height=12, fx=20.0, blob_px=1,
+                                        n_blobs=1, drop_color=set(range(2, 80))))
+    with BagReader(tmp_path / 'bag') as bag:
+        read_when_yielded = []
+        recs = []
+        for rec in bag.records():
+            recs.append(rec)
+            read_when_yielded.append(bag.stats.messages['/camera/depth/image_raw'])
+    assert len(recs) == 80 and bag.stats.colorless == 78
+    assert [r.frame.color is None for r in recs[:3]] == [False, False, True]
+    # Colour-less frames come out as the synchroniser gives up on them, not at the end:
+    # read-ahead is bounded by the reorder window (1 s = 30 frames) plus the queue (10).
+    assert read_when_yielded[2] < 50
+
+
+def test_depth_before_first_camera_info(tmp_path: Path) -> None:
+    # Info from frame 3: earlier depth images wait for it in the synchroniser (as in the node).
+    write_bag(tmp_path / 'a', BagSpec(frames=8, info_start=3))
+    recs, bag = _read(tmp_path / 'a')
+    assert len(recs) == 8 and all(r.frame.color is not None for r in recs)
+    # Info from frame 15: the first 5 depth images fall out of the queue (size 10): dropped.
+    write_bag(tmp_path / 'b', BagSpec(frames=20, info_start=15))
+    recs, bag = _read(tmp_path / 'b')
+    assert [r.frame.stamp_ns for r in recs] == [START_NS + i * PERIOD_NS for i in range(5, 20)]
+    assert bag.stats.dropped['/camera/depth/image_raw'] == 5
+
+
 @pytest.mark.parametrize(('topics', 'preset'), [(REALSENSE, 'RealSense'),
                                                 (KINECT, 'Azure Kinect')])
 def test_detects_driver_layouts(tmp_path: Path, topics: dict, preset: str) -> None:

@@ -411,6 +411,13 @@ def run(args: argparse.Namespace) -> int:
             failed += 1
             print(f'endeff process: FAILED {r.error}', file=sys.stderr)
         else:
+            print(f'{r.input}: {r.topics}', file=sys.stderr)
+            extra = ''
+            colorless = r.read_stats.get('colorless_frames', 0)
+            if colorless:
+                extra += f', {colorless} without colour'
+            if r.empty_frames:
+                extra += f', {r.empty_frames} rejected by the tracker'
             print(f'{r.input} -> {r.output}: {r.frames} frames in {r.seconds:.1f} s '
-                  f'({r.fps:.1f} frames/s)')
+                  f'({r.fps:.1f} frames/s{extra})')
     return 1 if failed else 0

@@ -19,6 +19,7 @@ yielded, with ``color=None`` (the tracker falls back to predicting without optic
 
 from __future__ import annotations
 
+import bisect
 import heapq
 import itertools
 from dataclasses import dataclass, field
@@ -397,24 +398,37 @@ class BagReader:
             last_yielded[0] = depth.stamp
             return BagRecord(frame, positions, depth.log_time)
 
+        # ``pending`` mirrors the synchroniser's depth queue (sorted by stamp): every depth
+        # message leaves that queue at its front, either in an emitted set or dropped (queue
+        # overflow, no colour partner, older than an emitted set). Dropped ones are yielded
+        # colour-less, so memory stays bounded by the queue size.
+        last_emitted: int | None = None
         for entry in self._ordered(conns, priority):
             stats.messages[entry.topic] += 1
             i = index[entry.topic]
+            late = False
             if i == 2:
                 last_info[0] = entry.msg
             elif i == 1:
-                pending.append(entry)
-            for color, depth, info in sync.add(i, entry.stamp, entry if i < 2 else entry.msg):
-                colors_used += 1
+                late = last_emitted is not None and entry.stamp <= last_emitted
+                if not late:
+                    bisect.insort(pending, entry, key=lambda e: e.stamp)
+            before = sync.stats.dropped[1]
+            sets = sync.add(i, entry.stamp, entry if i < 2 else entry.msg)
+            removed = sync.stats.dropped[1] - before - late + len(sets)
+            gone, pending = pending[:removed], pending[removed:]
+            emitted = {id(depth): (color, info) for color, depth, info in sets}
+            for color, depth, _ in sets:
                 newest = max(color.stamp, depth.stamp)
-                dead = [p for p in pending if p.stamp <= newest and p is not depth]
-                pending = [p for p in pending if p.stamp > newest]
-                out = [(p.stamp, 0, None, p, last_info[0]) for p in dead]
-                out.append((depth.stamp, 1, color, depth, info))
-                for _, _, c, d, inf in sorted(out, key=lambda item: (item[0], item[1])):
-                    rec = build(c, d, inf)
-                    if rec is not None:
-                        yield rec
+                last_emitted = newest if last_emitted is None else max(last_emitted, newest)
+            colors_used += len(sets)
+            if late:
+                gone.append(entry)
+            for d in sorted(gone, key=lambda e: e.stamp):
+                color, info = emitted.get(id(d), (None, last_info[0]))
+                rec = build(color, d, info)
+                if rec is not None:
+                    yield rec
         for p in pending:
             rec = build(None, p, last_info[0])
             if rec is not None:
