@@ -293,3 +293,27 @@ def test_depth_without_colour_is_processed_colourless_once(harness):
     assert [convert.stamp_to_ns(c.header.stamp) for c in h.clouds] == [12_000_000_000,
                                                                        12_100_000_000]
     assert h.tracker.frames[1].color is not None
+
+
+def test_sim_time_jumping_back_resets_tracker(harness):
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rosgraph_msgs.msg import Clock
+
+    h = harness(use_sim_time=True)
+    clock_pub = h.tester.create_publisher(
+        Clock, '/clock', QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+    assert spin_until(h.executor, lambda: clock_pub.get_subscription_count() > 0)
+
+    def tick(sec: int) -> None:
+        clock_pub.publish(Clock(clock=convert.make_header(sec * 10**9, '').stamp))
+        assert spin_until(h.executor, lambda: h.node.get_clock().now().nanoseconds == sec * 1e9)
+
+    tick(100)
+    tick(101)
+    h.send(101_000_000_000)
+    assert h.wait_clouds(1)
+    assert h.tracker.resets == 0
+    tick(50)  # bag replay restarted: /clock jumps back
+    h.send(101_100_000_000)  # (input stamps did not jump: only the clock did)
+    assert h.wait_clouds(2)
+    assert h.tracker.resets == 1
