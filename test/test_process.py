@@ -107,9 +107,10 @@ def test_output_bag_read_back(tmp_path: Path, in_storage: str, out_storage: str)
     assert states[2] == [1, 1, 1] and states[0] == [0, 0, 0]
 
 
-def test_copy_input(tmp_path: Path) -> None:
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_copy_input(tmp_path: Path, storage: str) -> None:
     src = tmp_path / 'in'
-    truth = write_bag(src, BagSpec(frames=5))
+    truth = write_bag(src, BagSpec(frames=5, storage=storage))
     out = tmp_path / 'out'
     process_bag(src, out, copy_input=True, tracker_factory=FakeTracker)
     for msgs in (_rosbags_messages(out), _mcap_messages(out)):

@@ -237,14 +237,21 @@ def _copy_merged(bag: BagReader, writer: Any, outputs: list[tuple[int, int, Any,
         if key not in out_keys:
             ext = getattr(conn, 'ext', None)
             qos = list(getattr(ext, 'offered_qos_profiles', []) or [])
-            if conn.msgdef.format != MessageDefinitionFormat.NONE and conn.digest:
-                out_keys[key] = writer.add_connection(conn.topic, conn.msgtype,
-                                                      msgdef=conn.msgdef.data,
-                                                      rihs01=conn.digest,
-                                                      offered_qos_profiles=qos)
-            else:
-                out_keys[key] = writer.add_connection(conn.topic, conn.msgtype, typestore=ts,
-                                                      offered_qos_profiles=qos)
+            try:
+                if conn.msgdef.format != MessageDefinitionFormat.NONE:
+                    rihs01 = conn.digest or bag.reader.typestore.hash_rihs01(conn.msgtype)
+                    out_keys[key] = writer.add_connection(conn.topic, conn.msgtype,
+                                                          msgdef=conn.msgdef.data,
+                                                          rihs01=rihs01,
+                                                          offered_qos_profiles=qos)
+                else:
+                    store = ts if conn.msgtype in ts.fielddefs else bag.reader.typestore
+                    out_keys[key] = writer.add_connection(conn.topic, conn.msgtype,
+                                                          typestore=store,
+                                                          offered_qos_profiles=qos)
+            except Exception as err:
+                raise BagError(bag.path, f'cannot copy topic {conn.topic} ({conn.msgtype}): '
+                                         f'{type(err).__name__}: {err}') from err
         mapping[id(conn)] = out_keys[key]
     conns = [c for c in bag.reader.connections if id(c) in mapping]
     inputs = ((log, -1, mapping[id(conn)], raw) for conn, log, raw in bag._messages(conns))
