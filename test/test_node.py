@@ -43,8 +43,9 @@ class FakeTracker:
     def update(self, frame: RGBDFrame) -> TrackerResult:
         self.frames.append(frame)
         self.params_seen.append(self.params)
-        if not np.isfinite(frame.depth).any():
-            msg = 'depth image has no valid reading'
+        assert np.isfinite(frame.depth).any(), 'the node must not pass all-NaN depth on'
+        if np.nanmin(frame.depth) > 8.0:
+            msg = 'nothing in front of the camera'
             raise InputError(msg)
         v, u = np.unravel_index(np.nanargmin(frame.depth), frame.depth.shape)
         z = float(frame.depth[v, u])
@@ -187,12 +188,15 @@ def _bad(kind: str) -> dict:
         return {'depth_msg': image_msg(np.zeros((H, W), np.uint8), 'mono8', 0, FRAME_ID)}
     if kind == 'size_mismatch':
         return {'color_msg': image_msg(np.zeros((H * 2, W * 2, 3), np.uint8), 'rgb8', 0, 'c')}
+    if kind == 'empty_foreground':  # the tracker's own InputError
+        return {'depth_msg': image_msg(np.full((H, W), 9000, np.uint16), '16UC1', 0, FRAME_ID)}
     return {'depth_msg': image_msg(np.zeros((H, W), np.uint16), '16UC1', 0, FRAME_ID)}
 
 
 @pytest.mark.parametrize('kind,text,publishes', [
     ('zero_k', 'calibrated', False), ('encoding', "'mono8'", False),
-    ('size_mismatch', 'colour image', False), ('all_nan', 'no valid reading', True)])
+    ('size_mismatch', 'colour image', False), ('all_nan', 'no valid reading', True),
+    ('empty_foreground', 'nothing in front', True)])
 def test_bad_input_warns_and_keeps_running(harness, kind, text, publishes):
     h = harness()
     stamp = 5_000_000_000
@@ -317,3 +321,49 @@ def test_sim_time_jumping_back_resets_tracker(harness):
     h.send(101_100_000_000)  # (input stamps did not jump: only the clock did)
     assert h.wait_clouds(2)
     assert h.tracker.resets == 1
+
+
+def test_real_tracker_on_a_synthetic_person(ros_context):
+    """Default tracker factory (the real core) end to end in-process."""
+    synth = pytest.importorskip('endeff_ros.synth')
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+    from endeff_ros.ros.node import EndeffNode
+
+    frame = synth.render_person_frame('t_pose')
+    k = frame.intrinsics
+    node = EndeffNode(namespace='/real')
+    tester = rclpy.create_node('tester', namespace='/real')
+    qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    pubs = [tester.create_publisher(CameraInfo, 'depth/camera_info', qos),
+            tester.create_publisher(Image, 'color/image_raw', qos),
+            tester.create_publisher(Image, 'depth/image_raw', qos)]
+    clouds: list = []
+    tester.create_subscription(PointCloud2, 'end_effectors', clouds.append, qos)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    executor.add_node(tester)
+    try:
+        assert spin_until(executor, lambda: all(p.get_subscription_count() for p in pubs) and
+                          node.pub_cloud.get_subscription_count() > 0)
+        info = info_msg(frame.stamp_ns, frame.frame_id, k.width, k.height)
+        info.k = [k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0]
+        pubs[0].publish(info)
+        assert spin_until(executor, lambda: node.stats.received['camera_info'] == 1)
+        pubs[1].publish(image_msg(frame.color, 'rgb8', frame.color_stamp_ns, frame.frame_id))
+        pubs[2].publish(image_msg(frame.depth.astype(np.float32), '32FC1', frame.stamp_ns,
+                                  frame.frame_id))
+        assert spin_until(executor, lambda: bool(clouds), timeout=30.0)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        tester.destroy_node()
+    points = convert.cloud_to_array(clouds[0])
+    assert convert.stamp_to_ns(clouds[0].header.stamp) == frame.stamp_ns
+    assert clouds[0].header.frame_id == frame.frame_id
+    from endeff_ros.scoring import score_frame
+
+    score = score_frame(convert.xyz(points), frame.gt)
+    assert score.tp >= 3, (convert.xyz(points), frame.gt)

@@ -19,6 +19,7 @@ from functools import partial
 from types import SimpleNamespace
 from typing import Any
 
+import numpy as np
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import JumpThreshold
@@ -256,6 +257,9 @@ class EndeffNode(Node):
             self.get_logger().warning(text, throttle_duration_sec=5)
             return
         try:
+            if not np.isfinite(frame.depth).any():
+                msg = f'depth image {frame.stamp_ns} ns has no valid reading (all 0 or NaN)'
+                raise InputError(msg)
             result = self.tracker.update(frame)
         except InputError as exc:
             text = f'no end-effectors in frame (publishing an empty cloud): {exc}'
