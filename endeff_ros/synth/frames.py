@@ -34,7 +34,8 @@ class SynthFrame:
     uint8 RGB, or None if this colour frame is dropped; ``depth`` (H, W) float32 metres with NaN
     = no reading (millimetre-rounded for 16UC1 sequences), or None if the depth frame is dropped.
     ``gt`` (M, 3) float64 end-effector positions in the optical frame (m), ``gt_ids`` (M,)
-    uint32, ``gt_visible`` (M,) bool (the end-effector's part is what the camera sees there).
+    uint32, ``gt_visible`` (M,) bool: the end-effector's own part is what the camera sees at
+    its projection and the sensor has a depth reading of that part within 2 px.
     """
 
     index: int
@@ -72,8 +73,22 @@ def _frame(name: str, index: int, u: float, seed: int, cam: Camera, stamp: int,
         depth = np.where(mm > 0, mm.astype(np.float32) / np.float32(1000.0), np.float32(np.nan))
     return SynthFrame(index, stamp, cstamp, None if drop_c else color,
                       None if drop_d else depth.astype(np.float32), cam.intrinsics,
-                      ren.gt.copy(), ent.gt_ids.astype(np.uint32), ren.gt_visible,
-                      cam.frame_id)
+                      ren.gt.copy(), ent.gt_ids.astype(np.uint32),
+                      _sensed(ren, ent.gt_prims, depth), cam.frame_id)
+
+
+def _sensed(ren, gt_prims: npt.NDArray[np.int64], depth: npt.NDArray[np.float32]
+            ) -> npt.NDArray[np.bool_]:
+    """Visibility (M,): the end-effector's own part is in view at its projection (1 px
+    tolerance) and has at least one depth reading within 2 px of it."""
+    vis = ren.gt_visible.copy()
+    uv = ren.camera.intrinsics.project(ren.gt)
+    h, w = depth.shape
+    for k in np.nonzero(vis)[0]:
+        ui, vi = int(round(uv[k, 0])), int(round(uv[k, 1]))
+        sl = np.s_[max(0, vi - 2):min(h, vi + 3), max(0, ui - 2):min(w, ui + 3)]
+        vis[k] = bool(((ren.owner[sl] == gt_prims[k]) & np.isfinite(depth[sl])).any())
+    return vis
 
 
 def render_sequence(name: str, *, quick: bool = False, seed: int = 0) -> Iterator[SynthFrame]:
@@ -96,7 +111,7 @@ def render_sequence(name: str, *, quick: bool = False, seed: int = 0) -> Iterato
 
 
 def render_person_frame(pose_name: str = 't_pose', seed: int = 0) -> SynthFrame:
-    """One frame of a single standing person 2.7 m away (about 20-30k foreground pixels).
+    """One frame of a single standing person 2.5 m away (about 23k foreground pixels).
 
     ``pose_name``: ``'t_pose'`` (arms straight out sideways) or ``'arms_down'`` (arms hanging a
     little away from the body).
@@ -110,7 +125,7 @@ def render_person_frame(pose_name: str = 't_pose', seed: int = 0) -> SynthFrame:
     al, ar = model.standing_ankles(0.12)
     pose = PersonPose(hand_l=model.arm_target(sl, 1, abd, 0.0, 0.99),
                       hand_r=model.arm_target(sr, -1, abd, 0.0, 0.99), ankle_l=al, ankle_r=ar)
-    ent = Placement(0.0, -2.7).apply(model.build(pose))
+    ent = Placement(0.0, -2.5).apply(model.build(pose))
     cam = default_camera()
     return _frame(f'person:{pose_name}', 0, 0.0, seed, cam, T0_NS, T0_NS, False, False,
                   entity=ent)

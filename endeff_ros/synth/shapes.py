@@ -14,6 +14,7 @@ The local frame also carries the surface texture, so the texture moves with the 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import numpy.typing as npt
@@ -90,8 +91,7 @@ class Primitive:
     def surface_points(self, n: int = 400) -> Vec:
         """About ``n`` points (K, 3) spread over the surface, for distance checks."""
         rng = np.random.default_rng(12345)
-        d = rng.normal(size=(n, 3))
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        d = _sphere_dirs(n)
         if self.kind == 'ellipsoid':
             local = d * self.size
         elif self.kind == 'capsule':
@@ -109,16 +109,27 @@ class Primitive:
         return local @ self.rot.T + self.center
 
 
+@lru_cache(maxsize=8)
+def _sphere_dirs(n: int) -> Vec:
+    """``n`` unit vectors (n, 3) spread evenly (Fibonacci sphere)."""
+    k = np.arange(n) + 0.5
+    z = 1 - 2 * k / n
+    phi = np.pi * (1 + 5**0.5) * k
+    r = np.sqrt(1 - z * z)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], 1)
+
+
 def surface_distance(a: Primitive, b: Primitive, n: int = 600) -> float:
     """Approximate gap (m) between the surfaces of ``a`` and ``b`` (0 when they overlap).
 
     Sampled: accurate to about a centimetre for the body-part sizes used here.
     """
+    from scipy.spatial import cKDTree
+
     pa, pb = a.surface_points(n), b.surface_points(n)
-    d = np.sqrt(((pa[:, None, :] - pb[None, :, :]) ** 2).sum(-1)).min()
     if _inside(b, pa).any() or _inside(a, pb).any():
         return 0.0
-    return float(d)
+    return float(cKDTree(pb).query(pa, k=1)[0].min())
 
 
 def _inside(p: Primitive, pts: Vec) -> npt.NDArray[np.bool_]:
@@ -135,7 +146,7 @@ def _inside(p: Primitive, pts: Vec) -> npt.NDArray[np.bool_]:
 
 def capsule(a: npt.ArrayLike, b: npt.ArrayLike, radius: float, hint: npt.ArrayLike,
             color: tuple[float, float, float], texture: int, part: str) -> Primitive:
-    """Capsule between points ``a`` and ``b`` (3,) of ``radius`` m; ``hint`` orients the texture."""
+    """Capsule from ``a`` to ``b`` (3,) of ``radius`` m; ``hint`` orients the texture."""
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
     axis = b - a
     half = 0.5 * float(np.linalg.norm(axis))
