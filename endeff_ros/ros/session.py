@@ -156,7 +156,10 @@ def _driver(args: argparse.Namespace) -> int:
         sent = stats.depth_sent
         spin_until(executor, lambda: all(s in collector.clouds[n] for n in topics
                                          for s in sent), 5.0 if args.rate else 30.0)
-        spin_for(executor, 1.5)  # trailing markers and a last diagnostics message
+        spin_until(executor, lambda: all(s in collector.markers for s in sent
+                                         if s in collector.clouds['node']), 2.0)
+        if args.rate:
+            spin_for(executor, 1.2)  # a last diagnostics message (node period 1 s)
         record.update(depth_sent=sent, waited_out=stats.waited_out,
                       replay_seconds=stats.seconds, duplicates=collector.duplicates,
                       diagnostics=diagnostics)
