@@ -195,7 +195,7 @@ def _hash(k: Vec) -> Vec:
 def _texture_params(texture: int, color: tuple[float, float, float]) -> tuple:
     rng = np.random.default_rng(texture)
     base = np.asarray(color)
-    alt = np.clip(base * 0.55 + rng.uniform(0.1, 0.45, 3), 0, 1)
+    alt = np.clip(0.4 * base + rng.uniform(0.15, 0.6, 3), 0, 1)
     cell = rng.uniform(0.035, 0.055)
     k = rng.normal(size=3)
     k /= np.linalg.norm(k) * rng.uniform(0.05, 0.09)
@@ -208,8 +208,8 @@ def _body_texture(p: Primitive, q: Vec) -> Vec:
     base, alt, cell, k, phase = _texture_params(p.texture, tuple(p.color))
     chk = (np.floor(q / cell).sum(1) % 2).astype(np.float64)
     stripe = 0.5 + 0.5 * np.sin(2 * np.pi * (q @ k) + phase)
-    mix = (0.35 * chk + 0.35 * stripe)[:, None]
-    rgb = base * (1 - mix) + alt * mix
+    mix = (0.45 * stripe)[:, None]
+    rgb = (base * (1 - mix) + alt * mix) * (0.68 + 0.32 * chk)[:, None]
     if p.part == 'head':  # hair on the top and back of the head
         hair = (q[:, 1] > 0.045) | ((q[:, 2] < -0.02) & (q[:, 1] > -0.07))
         rgb[hair] = HAIR * (0.8 + 0.4 * stripe[hair, None])

@@ -1,7 +1,7 @@
 """``endeff sheet``: a contact sheet (PNG) of benchmark bags, so a person can look at the data.
 
-One row per bag: for a few evenly spaced depth frames, the depth image (colour-mapped, 0.5 to
-5.5 m, black = no reading) and the nearest colour image, both with the ground-truth
+One row per bag: for a few evenly spaced depth frames, the depth image (colour-mapped, 1.5 to
+5.7 m, black = no reading) and the nearest colour image, both with the ground-truth
 end-effectors of that frame drawn (circle + id). Works on any bag in the benchmark form, not
 only the synthetic ones; directories are searched for bags (one copy per bag name, mcap first).
 """
@@ -20,6 +20,7 @@ DEPTH_TOPIC = '/camera/depth/image_raw'
 COLOR_TOPIC = '/camera/color/image_raw'
 INFO_TOPIC = '/camera/depth/camera_info'
 GT_TOPIC = '/ground_truth/end_effectors'
+DEPTH_RANGE = (1.5, 5.7)  # m, colour-map range (near = red)
 _ID_COLORS = [(0, 255, 255), (0, 255, 0), (255, 0, 255), (255, 128, 0), (0, 128, 255),
               (255, 255, 255), (128, 255, 128), (255, 128, 255), (255, 200, 100),
               (100, 200, 255)]
@@ -34,7 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def find_bags(paths: list[Path]) -> list[Path]:
-    """Bag directories (holding ``metadata.yaml``) under ``paths``; one per name, mcap first."""
+    """Bag directories (holding ``metadata.yaml``) under ``paths``; one per name, mcap first,
+    the synthetic sequences in their standard order."""
     found: dict[str, Path] = {}
     for p in paths:
         cands = [p] if (p / 'metadata.yaml').exists() else sorted(
@@ -42,7 +44,10 @@ def find_bags(paths: list[Path]) -> list[Path]:
         cands.sort(key=lambda q: ('mcap' not in q.parts, str(q)))
         for q in cands:
             found.setdefault(q.name, q)
-    return list(found.values())
+    from .sequences import SEQUENCES
+
+    rank = {n: i for i, n in enumerate(SEQUENCES)}
+    return sorted(found.values(), key=lambda q: (rank.get(q.name, len(rank)), q.name))
 
 
 def _image(msg) -> npt.NDArray:
@@ -133,7 +138,7 @@ def _draw_gt(img: npt.NDArray[np.uint8], k: npt.NDArray | None, gt, scale: float
 
 def _depth_vis(depth: npt.NDArray[np.float32]) -> npt.NDArray[np.uint8]:
     d = np.nan_to_num(depth, nan=0.0)
-    norm = np.clip((d - 0.5) / 5.0, 0, 1)
+    norm = np.clip((d - DEPTH_RANGE[0]) / (DEPTH_RANGE[1] - DEPTH_RANGE[0]), 0, 1)
     vis = cv2.applyColorMap((255 - norm * 255).astype(np.uint8), cv2.COLORMAP_TURBO)
     vis[d <= 0] = 0
     return vis
