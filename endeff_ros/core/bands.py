@@ -64,7 +64,9 @@ class Neighbours:
     def from_pairs(cls, n: int, i: npt.NDArray[np.intp], j: npt.NDArray[np.intp],
                    d: npt.NDArray[np.float64]) -> Neighbours:
         rows = np.concatenate([i, j])
-        order = np.argsort(rows, kind='stable')
+        # A stable sort of 16-bit keys is a radix sort: 5x faster than on int64 keys.
+        keys = rows.astype(np.uint16) if n <= np.iinfo(np.uint16).max else rows
+        order = np.argsort(keys, kind='stable')
         indices = np.concatenate([j, i])[order]
         data = np.concatenate([d, d])[order]
         indptr = np.zeros(n + 1, dtype=np.intp)
@@ -94,7 +96,9 @@ def density_mask(neighbours: Neighbours, eta: int) -> npt.NDArray[np.bool_]:
 
 def expand_bands(graph: Neighbours, dense: npt.NDArray[np.bool_],
                  seeds: npt.NDArray[np.intp], delta: float, *,
-                 max_bands: int | None = None) -> npt.NDArray[np.intp]:
+                 max_bands: int | None = None, points: npt.NDArray[np.float64] | None = None,
+                 entity: npt.NDArray[np.intp] | None = None, bridge_gap: float = 0.0,
+                 bridges: list[tuple[int, int]] | None = None) -> npt.NDArray[np.intp]:
     """Grow narrow bands from the zero level set ``seeds`` (Eqs. 1-4).
 
     Parameters
@@ -105,6 +109,10 @@ def expand_bands(graph: Neighbours, dense: npt.NDArray[np.bool_],
         disconnected in ``graph``).
     delta : δ_L, metres.
     max_bands : stop after this many bands (used for the rough expansion of the root).
+    points, entity, bridge_gap, bridges : when given, an entity whose parts are separated by
+        an occlusion gap (no δ_L neighbours, but closer than ``bridge_gap``) is crossed: once
+        the front dies, the unreached point of the entity closest to the banded ones seeds
+        the next band, and the pair is appended to ``bridges`` for the graph.
 
     Returns
     -------
@@ -136,6 +144,11 @@ def expand_bands(graph: Neighbours, dense: npt.NDArray[np.bool_],
             new = np.unique(cols)
         if new.size == 0:
             curve = _leaks(graph, band, dense)
+            if curve.size == 0 and bridge_gap > 0 and points is not None and entity is not None:
+                curve = _bridge(points, band, dense, entity, bridge_gap, k + 1, bridges)
+                if curve.size:
+                    k += 1
+                    continue
             if curve.size == 0:
                 break
             continue
@@ -145,6 +158,28 @@ def expand_bands(graph: Neighbours, dense: npt.NDArray[np.bool_],
         curve = outer if outer.size else new
         phi[new] = np.inf
     return band
+
+
+def _bridge(points: npt.NDArray[np.float64], band: npt.NDArray[np.intp],
+            dense: npt.NDArray[np.bool_], entity: npt.NDArray[np.intp], gap: float,
+            next_band: int, bridges: list[tuple[int, int]] | None) -> npt.NDArray[np.intp]:
+    """Seed the next band across an occlusion gap: the unreached dense point of an entity
+    closest to that entity's banded points (within ``gap``). Returns the seed (or nothing)."""
+    todo = np.flatnonzero(dense & (band == UNREACHED) & (entity >= 0))
+    done = np.flatnonzero(band != UNREACHED)
+    if todo.size == 0 or done.size == 0:
+        return np.zeros(0, dtype=np.intp)
+    dist, near = cKDTree(points[done]).query(points[todo], distance_upper_bound=gap)
+    same = np.isfinite(dist)
+    same[same] = entity[done[near[same]]] == entity[todo[same]]
+    if not same.any():
+        return np.zeros(0, dtype=np.intp)
+    best = int(np.argmin(np.where(same, dist, np.inf)))
+    seed, anchor = int(todo[best]), int(done[near[best]])
+    band[seed] = next_band
+    if bridges is not None:
+        bridges.append((anchor, seed))
+    return np.array([seed], dtype=np.intp)
 
 
 def _leaks(graph: Neighbours, band: npt.NDArray[np.intp],

@@ -39,7 +39,8 @@ class FloorPlane:
 
 
 def depth_to_points(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, *,
-                    stride: int = 1) -> npt.NDArray[np.float64]:
+                    stride: int = 1, z_range: tuple[float, float] = (0.0, MAX_RANGE_M),
+                    ) -> npt.NDArray[np.float64]:
     """Back-project the valid pixels of a depth image (Section 3).
 
     Parameters
@@ -48,6 +49,8 @@ def depth_to_points(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, *,
         no reading.
     intrinsics : pinhole model of the depth image; its size must match ``depth``.
     stride : keep every ``stride``-th pixel in u and v.
+    z_range : keep depths in this closed interval only (tested on the image, before any
+        back-projection, which is the cheapest place to apply the box's z limits).
 
     Returns
     -------
@@ -65,8 +68,9 @@ def depth_to_points(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, *,
         msg = f'depth must be float metres, got dtype {depth.dtype} (convert 16UC1 mm first)'
         raise InputError(msg)
     z = depth[::stride, ::stride]
+    lo, hi = max(z_range[0], 1e-6), min(z_range[1], MAX_RANGE_M)
     with np.errstate(invalid='ignore'):
-        valid = (z > 0) & (z < MAX_RANGE_M)  # NaN compares False
+        valid = (z >= lo) & (z <= hi)  # NaN compares False
     vv, uu = np.nonzero(valid)
     zz = z[vv, uu].astype(np.float64)
     x = (uu * stride - intrinsics.cx) * zz / intrinsics.fx
@@ -76,14 +80,14 @@ def depth_to_points(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, *,
 
 def box_mask(points: npt.NDArray[np.float64], params: EndeffParams) -> npt.NDArray[np.bool_]:
     """True for points inside the activity box ``box_min_* .. box_max_*``."""
-    lo = np.array([params.box_min_x, params.box_min_y, params.box_min_z])
-    hi = np.array([params.box_max_x, params.box_max_y, params.box_max_z])
-    return np.all((points >= lo) & (points <= hi), axis=1)
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    return ((x >= params.box_min_x) & (x <= params.box_max_x) & (y >= params.box_min_y)
+            & (y <= params.box_max_y) & (z >= params.box_min_z) & (z <= params.box_max_z))
 
 
 def fit_floor(points: npt.NDArray[np.float64], *, distance: float, max_tilt_deg: float,
               min_fraction: float, iterations: int, rng: np.random.Generator | None = None,
-              sample: int = 2048) -> FloorPlane | None:
+              sample: int = 1024) -> FloorPlane | None:
     """Fit the floor: the near-horizontal plane with the most inliers (vectorised RANSAC).
 
     Only planes whose normal is within ``max_tilt_deg`` of the camera's up axis (-y) are
@@ -166,7 +170,8 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
     ``floor`` may give a known plane; otherwise it is fitted when ``params.floor_removal``.
     Returns the (N, 3) foreground points and the floor plane used (or None).
     """
-    points = depth_to_points(depth, intrinsics, stride=params.pixel_stride)
+    points = depth_to_points(depth, intrinsics, stride=params.pixel_stride,
+                             z_range=(params.box_min_z, params.box_max_z))
     points = points[box_mask(points, params)]
     if params.floor_removal:
         if floor is None:

@@ -64,12 +64,15 @@ class TopologyGraph:
 
 def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
                 band: npt.NDArray[np.intp], neighbours: Neighbours, *,
-                attach_distance: float, attach_points: int) -> TopologyGraph:
+                attach_distance: float, attach_points: int,
+                bridges: list[tuple[int, int]] = ()) -> TopologyGraph:
     """Build the sub-band graph with attachment edges and Eq. 5 weights.
 
     ``neighbours`` is a radius graph of the points whose radius is at least λ
     (``attach_distance``); sub-band ``i`` and ``j`` are attached when at least P
     (``attach_points``) points of ``i`` have a point of ``j`` within λ, and vice versa.
+    ``bridges`` are point pairs across occlusion gaps found by the band expansion: their
+    sub-bands are linked too (an occluder separated them, not the entity's topology).
     """
     reached = subband != UNREACHED
     k = int(subband.max()) + 1 if reached.any() else 0
@@ -95,7 +98,14 @@ def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
     key = np.unique((a.astype(np.int64) * k + b) * n + p)
     pair, count = np.unique(key // n, return_counts=True)
     counts = sparse.csr_matrix((count, (pair // k, pair % k)), shape=(k, k))
-    attached = counts.minimum(counts.T) >= attach_points
+    attached = (counts.minimum(counts.T) >= attach_points).astype(np.int8)
+    if len(bridges):
+        pairs = np.asarray(bridges, dtype=np.intp)
+        sa, sb = subband[pairs[:, 0]], subband[pairs[:, 1]]
+        ok = (sa != sb) & (sa != UNREACHED) & (sb != UNREACHED)
+        link = sparse.csr_matrix((np.ones(ok.sum(), dtype=np.int8), (sa[ok], sb[ok])),
+                                 shape=(k, k))
+        attached = ((attached + link + link.T) > 0).astype(np.int8)
     rows, cols = sparse.triu(attached, k=1).nonzero()
     w = np.linalg.norm(centroids[rows] - centroids[cols], axis=1)  # Eq. 5
     w = np.maximum(w, 1e-9)

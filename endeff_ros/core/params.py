@@ -66,6 +66,8 @@ class EndeffParams:
     root_bands: int = _p(6, 'Bands of the rough expansion whose points give the refined '
                          'centroid (size of the massive part, e.g. torso).', symbol='N',
                          lo=1, hi=1000)
+    entity_gap: float = _p(0.25, 'Foreground clusters closer than this are one entity; the band '
+                           'expansion bridges such occlusion gaps.', unit='m', lo=0.0, hi=2.0)
     min_entity_points: int = _p(60, 'Connected foreground clusters smaller than this (after '
                                 'downsampling) are ignored.', lo=1, hi=1000000)
 
@@ -81,6 +83,10 @@ class EndeffParams:
     max_end_effectors: int = _p(12, 'Upper bound on end-effectors per entity.', lo=1, hi=100)
     tip_depth: float = _p(0.1, 'An end-effector is the centroid of its branch within this '
                           'geodesic depth of the extreme.', unit='m', lo=0.0, hi=1.0)
+
+    max_part_radius: float = _p(0.1, 'Cap on the terminal-part radius used to move the '
+                                'end-effector from the visible surface to the part centre; '
+                                '0 reports the surface.', unit='m', lo=0.0, hi=0.5)
 
     # --- Section 5: predict-update tracking ------------------------------------------------------
     flow_method: str = _p('dis', "Dense optical flow for the predict phase: 'dis' or "

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy.spatial import cKDTree
 from .bands import UNREACHED, Neighbours, components, density_mask, expand_bands, split_subbands
 from .cloud import FloorPlane, foreground_cloud
 from .graph import (TopologyGraph, approximate_geodesic, build_graph, find_end_effectors,
@@ -82,11 +83,13 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
     within = (neighbours.within(params.band_delta)
               if params.attach_distance > params.band_delta else neighbours)
     dense = density_mask(within, params.band_eta)
-    entity = _entities(within, dense, params.min_entity_points)
+    entity = _entities(points, within, dense, params.min_entity_points, params.entity_gap)
     timer.lap('neighbours')
 
     seeds, rough_roots = _roots(points, within, dense, entity, params)
-    band = expand_bands(within, dense, seeds, params.band_delta)
+    bridges: list[tuple[int, int]] = []
+    band = expand_bands(within, dense, seeds, params.band_delta, points=points, entity=entity,
+                        bridge_gap=params.entity_gap, bridges=bridges)
     band[seeds] = 1  # L_0^0 joins the first band so the root node has the first band's size
     band[entity < 0] = UNREACHED
     timer.lap('bands')
@@ -96,7 +99,7 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
     timer.lap('subbands')
     graph = build_graph(points, subband, band, neighbours,
                         attach_distance=params.attach_distance,
-                        attach_points=params.attach_points)
+                        attach_points=params.attach_points, bridges=bridges)
     timer.lap('graph')
 
     entities = []
@@ -108,7 +111,7 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
         for node, path in find_end_effectors(graph, root_node,
                                              min_geodesic=params.min_geodesic,
                                              max_count=params.max_end_effectors):
-            position = _tip_position(graph, path, dist_root, params.tip_depth)
+            position = _tip_position(points, subband, graph, path, dist_root, params)
             candidates.append(Candidate(
                 position=position, node=node, geodesic=geodesic(graph, path),
                 geodesic_approx=approximate_geodesic(position, graph, path, root),
@@ -123,15 +126,18 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
                          stage_ms=timer.stages)
 
 
-def _entities(graph: Neighbours, dense: npt.NDArray[np.bool_],
-              min_points: int) -> npt.NDArray[np.intp]:
-    """Connected clusters of dense points with at least ``min_points`` points, labelled
-    0..E-1 by decreasing size (-1 for everything else)."""
+def _entities(points: npt.NDArray[np.float64], graph: Neighbours,
+              dense: npt.NDArray[np.bool_], min_points: int,
+              gap: float) -> npt.NDArray[np.intp]:
+    """Entities: clusters of dense points, where clusters closer than ``gap`` are one entity
+    (self-occlusion cuts a bending torso from its legs; such parts stay one entity). Entities
+    with at least ``min_points`` points are labelled 0..E-1 by decreasing size, -1 elsewhere."""
     n = graph.n
     if n == 0:
         return np.zeros(0, dtype=np.intp)
     both = dense[graph.i] & dense[graph.j]
     comp = components(n, graph.i[both], graph.j[both])
+    comp = _merge_close(points, comp, dense, gap)
     counts = np.bincount(comp[dense], minlength=int(comp.max()) + 1)
     big = np.flatnonzero(counts >= min_points)
     order = big[np.argsort(-counts[big], kind='stable')]
@@ -140,6 +146,42 @@ def _entities(graph: Neighbours, dense: npt.NDArray[np.bool_],
     label = remap[comp]
     label[~dense] = -1
     return label
+
+
+def _merge_close(points: npt.NDArray[np.float64], comp: npt.NDArray[np.intp],
+                 dense: npt.NDArray[np.bool_], gap: float) -> npt.NDArray[np.intp]:
+    """Join components whose closest points are nearer than ``gap`` (union-find over the
+    few components; one KD-tree per component)."""
+    labels = np.unique(comp[dense])
+    if labels.size < 2 or gap <= 0:
+        return comp
+    members = [np.flatnonzero(dense & (comp == c)) for c in labels]
+    lo = np.array([points[m].min(axis=0) for m in members])
+    hi = np.array([points[m].max(axis=0) for m in members])
+    parent = np.arange(labels.size)
+
+    def find(x: int) -> int:
+        while parent[x] != x:
+            x = parent[x]
+        return x
+
+    trees: dict[int, cKDTree] = {}
+    for a in range(labels.size):
+        for b in range(a + 1, labels.size):
+            if np.any(lo[a] - hi[b] > gap) or np.any(lo[b] - hi[a] > gap):
+                continue
+            ra, rb = find(a), find(b)
+            if ra == rb:
+                continue
+            small, large = (a, b) if len(members[a]) < len(members[b]) else (b, a)
+            tree = trees.setdefault(large, cKDTree(points[members[large]]))
+            d, _ = tree.query(points[members[small]], distance_upper_bound=gap)
+            if np.isfinite(d).any():
+                parent[max(ra, rb)] = min(ra, rb)
+    roots = np.array([find(x) for x in range(labels.size)])
+    remap = np.zeros(int(comp.max()) + 1, dtype=np.intp)
+    remap[labels] = labels[roots]
+    return remap[comp]
 
 
 def _roots(points: npt.NDArray[np.float64], graph: Neighbours,
@@ -172,16 +214,43 @@ def _nearest(points: npt.NDArray[np.float64], mask: npt.NDArray[np.bool_],
                                        points[idx] - target))])
 
 
-def _tip_position(graph: TopologyGraph, path: npt.NDArray[np.intp],
+def _tip_position(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
+                  graph: TopologyGraph, path: npt.NDArray[np.intp],
                   dist_root: npt.NDArray[np.float64],
-                  depth: float) -> npt.NDArray[np.float64]:
-    """End-effector position: size-weighted centroid of the path's nodes within ``depth``
-    (geodesic) of the extreme node, i.e. the centre of the terminal part rather than its
-    outermost sliver."""
+                  params: EndeffParams) -> npt.NDArray[np.float64]:
+    """End-effector position: the centre of the terminal part, not its outermost sliver.
+
+    The terminal part is made of the path's sub-bands within ``tip_depth`` (geodesic) of the
+    extreme node; its centroid lies on the *visible* surface. Limbs, hands, heads and most
+    robot links are round, so the part's axis lies about one radius r behind that surface along
+    the viewing ray; r is estimated from the visible width of the part across its axis
+    (10th-90th percentile width / 1.6, exact for points uniform across a cylinder's silhouette)
+    and capped at ``max_part_radius``. Along the part's axis the centre is the deeper of the
+    tip centroid and the point one radius inside the extreme. Set ``max_part_radius`` to 0 to
+    report the surface centroid. (Measured on the synthetic set: mean error from ~6 cm to
+    ~3 cm, see the README.)
+    """
     d = dist_root[path]
-    near = path[d >= d[0] - depth]
-    w = graph.sizes[near].astype(np.float64)
-    return (graph.centroids[near] * w[:, None]).sum(axis=0) / w.sum()
+    near = path[d >= d[0] - params.tip_depth]
+    tip = points[np.isin(subband, near)]
+    centre = tip.mean(axis=0)
+    if params.max_part_radius <= 0 or len(tip) < 3:
+        return centre
+    ray = centre / np.linalg.norm(centre)
+    inward = graph.centroids[path[min(len(path) - 1, len(near))]] - centre
+    across = np.cross(inward, ray)
+    norm = np.linalg.norm(across)
+    if norm < 1e-9:
+        return centre
+    x = (tip - centre) @ (across / norm)
+    p10, p90 = np.percentile(x, [10, 90])
+    radius = min((p90 - p10) / 1.6, params.max_part_radius)
+    # Along the axis, a rounded end's centre lies one radius inside its extreme: a head's
+    # tip region is only its top cap, whose centroid sits above the head's centre.
+    axis = inward - (inward @ ray) * ray
+    axis /= max(np.linalg.norm(axis), 1e-9)
+    extreme = np.percentile((tip - centre) @ axis, 2)
+    return centre + max(0.0, extreme + radius) * axis + radius * ray
 
 
 class _StageTimer:
