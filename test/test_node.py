@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import os
 
 import numpy as np
 import pytest
@@ -63,7 +64,8 @@ class FakeTracker:
 
 @pytest.fixture(scope='session')
 def ros_context():
-    rclpy.init()
+    # A private domain: other test runs on this machine (and their /diagnostics) stay apart.
+    rclpy.init(domain_id=200 + os.getpid() % 30)
     yield
     rclpy.shutdown()
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
@@ -110,9 +111,11 @@ def summarise(latency_ms: dict[int, float], sent: int) -> dict[str, Any]:
 
 
 def run_one(*, profile: bool, reliability: str, seconds: float, rate: float,
-            width: int = 640, height: int = 480, domain_id: int = 77) -> dict[str, Any]:
+            width: int = 640, height: int = 480, domain_id: int | None = None) -> dict[str, Any]:
     """One publisher/subscriber pair in separate processes; returns the subscriber's summary."""
     frames = max(1, round(seconds * rate))
+    if domain_id is None:
+        domain_id = 100 + os.getpid() % 100
     env = ros_env(profile=profile, domain_id=domain_id)
     mod = ['-m', 'endeff_ros.ros.dds_bench']
     sub = start([*mod, 'sub', '--reliability', reliability, '--frames', str(frames)], env,
