@@ -8,13 +8,15 @@ frames without an output are counted as dropped (the node skips frames it is too
 
     python -m endeff_ros.ros.latency_bench [--bag BAG] [--rate 30] [--loops 3] [--no-profile]
 
-``ros_latency_bench()`` is what ``endeff bench --ros`` calls; it returns the JSON-ready dict.
+``benchmark()`` (what ``endeff bench --ros`` calls) and ``ros_latency_bench()`` return the
+JSON-ready dict.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tempfile
 from pathlib import Path
@@ -57,6 +59,26 @@ def ros_latency_bench(bag: str | Path | None = None, *, rate_hz: float = 30.0,
             'fastdds_profile': profile, 'node': record['latency']['node'],
             'relay': record['latency']['relay'],
             'node_diagnostics': {k: diag[k] for k in keys if k in diag}}
+
+
+def benchmark(**kwargs: Any) -> dict[str, Any]:
+    """``endeff bench --ros``: :func:`ros_latency_bench` with every CPU available.
+
+    ``endeff bench`` pins itself to one core for the single-frame timings; the node, the relay
+    and the driver are child processes and would inherit that, so the pinning is lifted for
+    the duration of the run.
+    """
+    pinned = os.sched_getaffinity(0) if hasattr(os, 'sched_getaffinity') else None
+    try:
+        if pinned is not None:
+            try:
+                os.sched_setaffinity(0, set(range(os.cpu_count() or 1)))
+            except OSError:
+                pass
+        return ros_latency_bench(**kwargs)
+    finally:
+        if pinned is not None:
+            os.sched_setaffinity(0, pinned)
 
 
 def main(argv: list[str] | None = None) -> int:
