@@ -65,9 +65,10 @@ def generate(out: Path, names: list[str], storages: list[str], *, quick: bool = 
     jobs = max(1, min(jobs, len(names)))
     if jobs == 1:
         return {n: generate_one(n, out, storages, quick, seed) for n in names}
-    # Longest sequences first so the workers finish together.
+    # Longest sequences first so the workers finish together; spawned workers (no fork of a
+    # possibly multi-threaded caller).
     order = sorted(names, key=lambda n: -SPECS[n].frames)
-    with ProcessPoolExecutor(jobs, mp_context=get_context('fork')) as pool:
+    with ProcessPoolExecutor(jobs, mp_context=get_context('spawn')) as pool:
         futs = {n: pool.submit(generate_one, n, out, storages, quick, seed) for n in order}
         return {n: futs[n].result() for n in names}
 
