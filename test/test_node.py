@@ -369,3 +369,27 @@ def test_real_tracker_on_a_synthetic_person(ros_context):
 
     score = score_frame(convert.xyz(points), frame.gt)
     assert score.tp >= 3, (convert.xyz(points), frame.gt)
+
+
+def test_debug_outputs_switch_at_runtime(harness):
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import Image, PointCloud2
+
+    h = harness(publish_debug_bands=True)
+    bands: list = []
+    images: list = []
+    h.tester.create_subscription(PointCloud2, 'debug/bands', bands.append, 10)
+    h.tester.create_subscription(Image, 'debug/image', images.append, 10)
+    assert spin_until(h.executor, lambda: h.node.pub_bands.get_subscription_count() > 0 and
+                      h.node.pub_image.get_subscription_count() > 0)
+    h.send(13_000_000_000)
+    assert h.wait_clouds(1) and spin_until(h.executor, lambda: bool(bands))
+    assert 'rgb' in convert.cloud_to_array(bands[0]).dtype.names and not images
+    assert h.node.set_parameters([Parameter('publish_debug_image', value=True)])[0].successful
+    h.send(13_100_000_000)
+    assert h.wait_clouds(2) and spin_until(h.executor, lambda: bool(images))
+    image = images[0]
+    assert (image.encoding, image.width, image.height) == ('rgb8', W, H)
+    assert convert.stamp_to_ns(image.header.stamp) == 13_100_000_000
+    drawn = convert.color_image_to_array(image)
+    assert (drawn != 90).any()  # the track was drawn over the uniform input colour
