@@ -30,13 +30,18 @@ class TopologyGraph:
     """Sub-band graph of the whole frame (entities are disconnected components).
 
     ``centroids`` (K, 3) node positions; ``sizes`` (K,) points per node; ``band`` (K,) band
-    of each node; ``weights`` (K, K) sparse symmetric Eq. 5 weights.
+    of each node; ``weights`` (K, K) sparse symmetric Eq. 5 weights. ``dist`` (K, K) and
+    ``pred`` (K, K) are all-pairs geodesic distances (Eq. 6) and predecessors: the graph has
+    a few hundred nodes at most, so one all-pairs Dijkstra per frame is cheaper than the many
+    single-source runs the iterated search and the tracker would otherwise make.
     """
 
     centroids: npt.NDArray[np.float64]
     sizes: npt.NDArray[np.intp]
     band: npt.NDArray[np.intp]
     weights: sparse.csr_matrix
+    dist: npt.NDArray[np.float64]
+    pred: npt.NDArray[np.intp]
 
     @property
     def n_nodes(self) -> int:
@@ -45,21 +50,19 @@ class TopologyGraph:
     def shortest_paths(self, sources: npt.ArrayLike) -> tuple[npt.NDArray[np.float64],
                                                               npt.NDArray[np.intp]]:
         """Geodesic distance (Eq. 6) of every node to the nearest of ``sources`` and the
-        predecessor array (-9999 at sources and unreachable nodes)."""
-        dist, pred = csgraph.dijkstra(self.weights, directed=False, indices=sources,
-                                      return_predecessors=True, min_only=True)[:2]
-        return dist, pred
+        predecessor array towards it (-9999 at sources and unreachable nodes)."""
+        src = np.atleast_1d(np.asarray(sources, dtype=np.intp))
+        d = self.dist[src]
+        nearest = np.argmin(d, axis=0)
+        cols = np.arange(self.n_nodes)
+        return d[nearest, cols], self.pred[src[nearest], cols]
 
     def geodesic_between(self, a: npt.ArrayLike, b: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """(len(a), len(b)) geodesic distances between nodes ``a`` and nodes ``b`` (inf if
         they are in different components)."""
         a = np.atleast_1d(np.asarray(a, dtype=np.intp))
         b = np.atleast_1d(np.asarray(b, dtype=np.intp))
-        if a.size == 0 or b.size == 0:
-            return np.zeros((a.size, b.size))
-        dist = csgraph.dijkstra(self.weights, directed=False, indices=np.unique(a))
-        lookup = {node: row for row, node in enumerate(np.unique(a))}
-        return dist[[lookup[x] for x in a]][:, b]
+        return self.dist[np.ix_(a, b)]
 
 
 def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
@@ -89,29 +92,29 @@ def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
     pi, pj = neighbours.i[near], neighbours.j[near]
     si, sj = subband[pi], subband[pj]
     keep = (si != sj) & (si != UNREACHED) & (sj != UNREACHED)
-    # Both directions: (sub-band of p, other sub-band, p).
-    a = np.concatenate([si[keep], sj[keep]])
-    b = np.concatenate([sj[keep], si[keep]])
-    p = np.concatenate([pi[keep], pj[keep]])
-    # Distinct points p of sub-band a having a neighbour in sub-band b.
-    n = len(points)
-    key = np.unique((a.astype(np.int64) * k + b) * n + p)
-    pair, count = np.unique(key // n, return_counts=True)
-    counts = sparse.csr_matrix((count, (pair // k, pair % k)), shape=(k, k))
-    attached = (counts.minimum(counts.T) >= attach_points).astype(np.int8)
+    # touch[p, b]: point p has a point of sub-band b within λ (both directions of each pair).
+    touch = np.zeros((len(points), k), dtype=bool)
+    touch[pi[keep], sj[keep]] = True
+    touch[pj[keep], si[keep]] = True
+    p, b = np.divmod(np.flatnonzero(touch), k)
+    counts = np.bincount(subband[p] * k + b, minlength=k * k).reshape(k, k)
+    attached = np.minimum(counts, counts.T) >= attach_points
     if len(bridges):
         pairs = np.asarray(bridges, dtype=np.intp)
         sa, sb = subband[pairs[:, 0]], subband[pairs[:, 1]]
         ok = (sa != sb) & (sa != UNREACHED) & (sb != UNREACHED)
-        link = sparse.csr_matrix((np.ones(ok.sum(), dtype=np.int8), (sa[ok], sb[ok])),
-                                 shape=(k, k))
-        attached = ((attached + link + link.T) > 0).astype(np.int8)
-    rows, cols = sparse.triu(attached, k=1).nonzero()
+        attached[sa[ok], sb[ok]] = attached[sb[ok], sa[ok]] = True
+    rows, cols = np.nonzero(np.triu(attached, k=1))
     w = np.linalg.norm(centroids[rows] - centroids[cols], axis=1)  # Eq. 5
     w = np.maximum(w, 1e-9)
     weights = sparse.csr_matrix((np.r_[w, w], (np.r_[rows, cols], np.r_[cols, rows])),
                                 shape=(k, k))
-    return TopologyGraph(centroids, sizes, node_band, weights)
+    if k:
+        dist, pred = csgraph.shortest_path(weights, method='D', directed=False,
+                                           return_predecessors=True)
+    else:
+        dist, pred = np.zeros((0, 0)), np.zeros((0, 0), dtype=np.intp)
+    return TopologyGraph(centroids, sizes, node_band, weights, dist, pred)
 
 
 def path_to_sources(pred: npt.NDArray[np.intp], node: int) -> npt.NDArray[np.intp]:
@@ -129,7 +132,7 @@ def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
     Returns ``(node, path)`` per end-effector in the order found, ``path`` running from the
     end-effector to the root over the original graph (for Eqs. 6-7).
     """
-    dist_root, pred_root = graph.shortest_paths([root])
+    pred_root = graph.pred[root]
     sources = [root]
     found: list[tuple[int, npt.NDArray[np.intp]]] = []
     while len(found) < max_count:

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
-from .bands import UNREACHED, Neighbours, components, density_mask, expand_bands, split_subbands
+from .bands import UNREACHED, Neighbours, density_mask, expand_bands, split_subbands
 from .cloud import FloorPlane, foreground_cloud
 from .graph import (TopologyGraph, approximate_geodesic, build_graph, find_end_effectors,
                     geodesic)
@@ -107,7 +107,7 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
         root_node = int(subband[seed])
         root = points[seed]
         candidates = []
-        dist_root, _ = graph.shortest_paths([root_node])
+        dist_root = graph.dist[root_node]
         for node, path in find_end_effectors(graph, root_node,
                                              min_geodesic=params.min_geodesic,
                                              max_count=params.max_end_effectors):
@@ -135,8 +135,7 @@ def _entities(points: npt.NDArray[np.float64], graph: Neighbours,
     n = graph.n
     if n == 0:
         return np.zeros(0, dtype=np.intp)
-    both = dense[graph.i] & dense[graph.j]
-    comp = components(n, graph.i[both], graph.j[both])
+    comp = graph.components(dense[graph.i] & dense[graph.j])
     comp = _merge_close(points, comp, dense, gap)
     counts = np.bincount(comp[dense], minlength=int(comp.max()) + 1)
     big = np.flatnonzero(counts >= min_points)

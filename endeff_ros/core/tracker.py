@@ -174,10 +174,9 @@ class Tracker:
         if entity < 0 or estimate.graph is None:
             return np.nan
         ent = estimate.entities[entity]
-        dist, pred = estimate.graph.shortest_paths([ent.root_node])
-        if not np.isfinite(dist[node]):
+        if not np.isfinite(estimate.graph.dist[ent.root_node, node]):
             return np.nan
-        path = path_to_sources(pred, node)
+        path = path_to_sources(estimate.graph.pred[ent.root_node], node)
         return approximate_geodesic(position, estimate.graph, path, ent.root)
 
     def _similarity(self, estimate: FrameEstimate, preds: list[_Prediction],
