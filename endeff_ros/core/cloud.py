@@ -87,7 +87,7 @@ def box_mask(points: npt.NDArray[np.float64], params: EndeffParams) -> npt.NDArr
 
 def fit_floor(points: npt.NDArray[np.float64], *, distance: float, max_tilt_deg: float,
               min_fraction: float, iterations: int, rng: np.random.Generator | None = None,
-              sample: int = 1024) -> FloorPlane | None:
+              sample: int = 512) -> FloorPlane | None:
     """Fit the floor: the near-horizontal plane with the most inliers (vectorised RANSAC).
 
     Only planes whose normal is within ``max_tilt_deg`` of the camera's up axis (-y) are

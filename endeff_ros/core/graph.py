@@ -105,12 +105,14 @@ def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
         ok = (sa != sb) & (sa != UNREACHED) & (sb != UNREACHED)
         attached[sa[ok], sb[ok]] = attached[sb[ok], sa[ok]] = True
     rows, cols = np.nonzero(np.triu(attached, k=1))
-    w = np.linalg.norm(centroids[rows] - centroids[cols], axis=1)  # Eq. 5
-    w = np.maximum(w, 1e-9)
-    weights = sparse.csr_matrix((np.r_[w, w], (np.r_[rows, cols], np.r_[cols, rows])),
-                                shape=(k, k))
+    seg = centroids[rows] - centroids[cols]
+    w = np.maximum(np.sqrt(np.einsum('ij,ij->i', seg, seg)), 1e-9)  # Eq. 5
+    dense = np.zeros((k, k))
+    dense[rows, cols] = dense[cols, rows] = w
+    weights = sparse.csr_matrix(dense)
     if k:
-        dist, pred = csgraph.shortest_path(weights, method='D', directed=False,
+        # Dense input: zeros are non-edges; cheaper than building the sparse form twice.
+        dist, pred = csgraph.shortest_path(dense, method='D', directed=False,
                                            return_predecessors=True)
     else:
         dist, pred = np.zeros((0, 0)), np.zeros((0, 0), dtype=np.intp)
@@ -126,22 +128,24 @@ def path_to_sources(pred: npt.NDArray[np.intp], node: int) -> npt.NDArray[np.int
 
 
 def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
-                       max_count: int) -> list[tuple[int, npt.NDArray[np.intp]]]:
+                       max_count: int) -> list[tuple[int, npt.NDArray[np.intp], float]]:
     """Iterated Dijkstra with zero-weight edges along each found path (Baak et al.).
 
-    Returns ``(node, path)`` per end-effector in the order found, ``path`` running from the
-    end-effector to the root over the original graph (for Eqs. 6-7).
+    Returns ``(node, path, protrusion)`` per end-effector in the order found: ``path`` runs
+    from the end-effector to the root over the original graph (for Eqs. 6-7); ``protrusion``
+    is its geodesic distance to the target set when found (root and earlier paths), the
+    quantity compared with g.
     """
     pred_root = graph.pred[root]
     sources = [root]
-    found: list[tuple[int, npt.NDArray[np.intp]]] = []
+    found: list[tuple[int, npt.NDArray[np.intp], float]] = []
     while len(found) < max_count:
         dist, pred = graph.shortest_paths(sources)
         dist = np.where(np.isfinite(dist), dist, -1.0)
         node = int(np.argmax(dist))
         if dist[node] < min_geodesic:
             break
-        found.append((node, path_to_sources(pred_root, node)))
+        found.append((node, path_to_sources(pred_root, node), float(dist[node])))
         # Zero-weight edges from every node of the new path to the target: add them as sources.
         sources.extend(path_to_sources(pred, node)[:-1].tolist())
     return found

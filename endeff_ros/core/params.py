@@ -41,7 +41,7 @@ class EndeffParams:
     box_max_z: float = _p(4.3, 'Foreground box, maximum z (depth).', unit='m', lo=0.0, hi=20.0)
     pixel_stride: int = _p(2, 'Use every n-th pixel in u and v before back-projection.',
                            lo=1, hi=8)
-    voxel_size: float = _p(0.025, 'Voxel grid cell for downsampling the foreground; 0 = off.',
+    voxel_size: float = _p(0.03, 'Voxel grid cell for downsampling the foreground; 0 = off.',
                            unit='m', lo=0.0, hi=0.2)
     floor_removal: bool = _p(True, 'Fit the floor plane (RANSAC) and drop points on it.')
     floor_distance: float = _p(0.03, 'Points closer than this to the floor plane are floor.',
@@ -50,10 +50,10 @@ class EndeffParams:
                                    unit='deg', lo=0.0, hi=90.0)
     floor_min_fraction: float = _p(0.05, 'A floor must hold at least this fraction of points.',
                                    lo=0.0, hi=1.0)
-    floor_iterations: int = _p(64, 'RANSAC hypotheses for the floor plane.', lo=1, hi=10000)
+    floor_iterations: int = _p(40, 'RANSAC hypotheses for the floor plane.', lo=1, hi=10000)
 
     # --- Section 4.1: narrow-band level-set expansion ------------------------------------------
-    band_delta: float = _p(0.07, 'Proximity constraint: new band points lie within this '
+    band_delta: float = _p(0.08, 'Proximity constraint: new band points lie within this '
                            'distance of the contour curve(t) (Eqs. 1-2).', symbol='δ_L',
                            unit='m', lo=0.005, hi=1.0)
     band_eta: int = _p(4, 'Density constraint: a point needs at least this many neighbours '
@@ -72,7 +72,7 @@ class EndeffParams:
                                 'downsampling) are ignored.', lo=1, hi=1000000)
 
     # --- Section 4.2: topology graph and extrema ------------------------------------------------
-    attach_distance: float = _p(0.05, 'Attachment: points closer than this to the other '
+    attach_distance: float = _p(0.06, 'Attachment: points closer than this to the other '
                                 'sub-band count towards attachment.', symbol='λ', unit='m',
                                 lo=0.001, hi=1.0)
     attach_points: int = _p(2, 'Attachment: each sub-band needs at least this many points '
@@ -104,6 +104,9 @@ class EndeffParams:
                           'this many frames.', symbol='T', lo=0, hi=1000)
     memory_sigma: float = _p(0.8, 'Geodesic memory penalty, α = σ^k (Eqs. 8-9).', symbol='σ',
                              lo=0.0, hi=1.0)
+    duplicate_distance: float = _p(0.12, 'A predicted end-effector closer than this to a '
+                                   'detected (or longer-memory) one is dropped as a duplicate.',
+                                   unit='m', lo=0.0, hi=1.0)
     max_rectify_distance: float = _p(0.15, 'A prediction farther than this from every '
                                      'current point is dropped.', unit='m', lo=0.0, hi=5.0)
 

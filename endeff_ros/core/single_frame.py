@@ -102,20 +102,21 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
                         attach_points=params.attach_points, bridges=bridges)
     timer.lap('graph')
 
+    members = _Members(subband, graph.n_nodes)
     entities = []
     for e, seed in enumerate(seeds):
         root_node = int(subband[seed])
         root = points[seed]
         candidates = []
         dist_root = graph.dist[root_node]
-        for node, path in find_end_effectors(graph, root_node,
+        for node, path, protrusion in find_end_effectors(graph, root_node,
                                              min_geodesic=params.min_geodesic,
                                              max_count=params.max_end_effectors):
-            position = _tip_position(points, subband, graph, path, dist_root, params)
+            position = _tip_position(points, members, graph, path, dist_root, params)
             candidates.append(Candidate(
                 position=position, node=node, geodesic=geodesic(graph, path),
                 geodesic_approx=approximate_geodesic(position, graph, path, root),
-                path=graph.centroids[path]))
+                path=graph.centroids[path], protrusion=protrusion))
         entities.append(EntityEstimate(entity=e, root=root, candidates=candidates,
                                        graph=graph, point_index=np.flatnonzero(entity == e),
                                        root_node=root_node, rough_root=rough_roots[e]))
@@ -213,7 +214,24 @@ def _nearest(points: npt.NDArray[np.float64], mask: npt.NDArray[np.bool_],
                                        points[idx] - target))])
 
 
-def _tip_position(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
+class _Members:
+    """Point indices of each sub-band (one stable sort, then slices)."""
+
+    def __init__(self, subband: npt.NDArray[np.intp], n_nodes: int) -> None:
+        self.order = np.argsort(subband, kind='stable')
+        self.bounds = np.searchsorted(subband[self.order], np.arange(n_nodes + 1))
+
+    def of(self, nodes: npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
+        return np.concatenate([self.order[self.bounds[n]:self.bounds[n + 1]] for n in nodes])
+
+
+def _quantile(values: npt.NDArray[np.float64], q: float) -> float:
+    """Lower-interpolated quantile (np.percentile costs ~30 µs of overhead per call)."""
+    s = np.sort(values)
+    return float(s[int(q * (len(s) - 1))])
+
+
+def _tip_position(points: npt.NDArray[np.float64], members: _Members,
                   graph: TopologyGraph, path: npt.NDArray[np.intp],
                   dist_root: npt.NDArray[np.float64],
                   params: EndeffParams) -> npt.NDArray[np.float64]:
@@ -231,7 +249,7 @@ def _tip_position(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp]
     """
     d = dist_root[path]
     near = path[d >= d[0] - params.tip_depth]
-    tip = points[np.isin(subband, near)]
+    tip = points[members.of(near)]
     centre = tip.mean(axis=0)
     if params.max_part_radius <= 0 or len(tip) < 3:
         return centre
@@ -242,13 +260,13 @@ def _tip_position(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp]
     if norm < 1e-9:
         return centre
     x = (tip - centre) @ (across / norm)
-    p10, p90 = np.percentile(x, [10, 90])
+    p10, p90 = _quantile(x, 0.1), _quantile(x, 0.9)
     radius = min((p90 - p10) / 1.6, params.max_part_radius)
     # Along the axis, a rounded end's centre lies one radius inside its extreme: a head's
     # tip region is only its top cap, whose centroid sits above the head's centre.
     axis = inward - (inward @ ray) * ray
     axis /= max(np.linalg.norm(axis), 1e-9)
-    extreme = np.percentile((tip - centre) @ axis, 2)
+    extreme = _quantile((tip - centre) @ axis, 0.02)
     return centre + max(0.0, extreme + radius) * axis + radius * ray
 
 

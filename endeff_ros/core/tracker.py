@@ -255,7 +255,23 @@ class Tracker:
             survivors.append(_TrackState(
                 id=self._new_id(), position=cand.position, geodesic=cand.geodesic_approx,
                 entity=cand_entity[j], path=cand.path))
-        return survivors
+        return self._drop_duplicates(survivors)
+
+    def _drop_duplicates(self, tracks: list[_TrackState]) -> list[_TrackState]:
+        """Remove predicted tracks closer than ``duplicate_distance`` to a track kept before
+        them (detections first, then by memorised geodesic distance): a prediction that ends
+        up on an end-effector another track already holds is the same end-effector twice."""
+        radius = self.params.duplicate_distance
+        if radius <= 0 or len(tracks) < 2:
+            return tracks
+        order = sorted(tracks, key=lambda t: (not t.detected, -t.geodesic))
+        kept: list[_TrackState] = []
+        for t in order:
+            if not t.detected and any(np.linalg.norm(t.position - k.position) < radius
+                                      for k in kept):
+                continue
+            kept.append(t)
+        return sorted(kept, key=lambda t: t.id)
 
     def _left_view(self, pr: _Prediction) -> bool:
         """True when a prediction is far from every current point (it left the foreground)."""

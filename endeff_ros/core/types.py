@@ -94,7 +94,9 @@ class Candidate:
 
     ``geodesic`` is Eq. 6 (sum of edge weights on the shortest path to the root);
     ``geodesic_approx`` is Eq. 7 (through the mid-band of that path); ``path`` holds the
-    sub-band centroids from the end-effector to the root, (K, 3).
+    sub-band centroids from the end-effector to the root, (K, 3); ``protrusion`` is its
+    geodesic distance to the root and the earlier end-effectors' paths when the iterated
+    Dijkstra found it (compared with g).
     """
 
     position: npt.NDArray[np.float64]
@@ -102,6 +104,7 @@ class Candidate:
     geodesic: float
     geodesic_approx: float
     path: npt.NDArray[np.float64]
+    protrusion: float = 0.0
 
 
 @dataclass(frozen=True)
