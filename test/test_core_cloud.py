@@ -1,0 +1,389 @@
+"""Section 3 of the core (depth -> foreground cloud) and the input checks of the core types.
+
+Depth images are hand-made (a few pixels checked against the pinhole model) or rendered from the
+capsule scenes of :mod:`shapes`; every random draw is seeded.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import shapes
+from scipy.spatial.transform import Rotation
+
+from endeff_ros.core.cloud import (
+    MAX_RANGE_M,
+    FloorPlane,
+    box_mask,
+    depth_to_points,
+    fit_floor,
+    foreground_cloud,
+    voxel_downsample,
+)
+from endeff_ros.core.errors import InputError, ParameterError
+from endeff_ros.core.params import EndeffParams
+from endeff_ros.core.types import Intrinsics, RGBDFrame
+from endeff_ros.ros.convert import depth_image_to_array
+
+K_SMALL = Intrinsics(fx=50.0, fy=60.0, cx=3.5, cy=2.5, width=8, height=6)
+
+
+def pinhole(u, v, z, k=K_SMALL):
+    """The optical-frame point seen at pixel (u, v) with depth z."""
+    return np.array([(u - k.cx) * z / k.fx, (v - k.cy) * z / k.fy, z])
+
+
+def as_set(points, decimals=9):
+    """Rows of ``points`` as a set of rounded tuples (order-free comparison)."""
+    return {tuple(np.round(p, decimals)) for p in np.asarray(points)}
+
+
+def rotate_about_camera(scene, rotation, camera_height):
+    """The scene moved by ``rotation`` about the optical centre (optical frame), i.e. the
+    same scene seen by a camera turned by the inverse rotation."""
+
+    def move(p):
+        return shapes.to_optical(shapes.to_optical(p, camera_height) @ rotation.T, camera_height)
+
+    return shapes.Scene([move(s) for s in scene.samples], [move(t)[0] for t in scene.tips])
+
+
+def scene_points(scene, camera_height=1.1):
+    """Rendered depth -> all valid points inside the default foreground box."""
+    depth, _ = shapes.render(scene, camera_height=camera_height)
+    points = depth_to_points(depth, shapes.K640, stride=2)
+    return points[box_mask(points, EndeffParams())]
+
+
+def floor_args(params=None):
+    params = params or EndeffParams()
+    return {'distance': params.floor_distance, 'max_tilt_deg': params.floor_max_tilt_deg,
+            'min_fraction': params.floor_min_fraction, 'iterations': params.floor_iterations}
+
+
+# ---------------------------------------------------------------------------------------------
+# depth_to_points
+# ---------------------------------------------------------------------------------------------
+
+def _depth_msg(pixels_mm):
+    """A duck-typed ``sensor_msgs/Image`` in 16UC1 (millimetres)."""
+    h, w = pixels_mm.shape
+    return SimpleNamespace(encoding='16UC1', height=h, width=w, step=2 * w, is_bigendian=0,
+                           data=pixels_mm.astype('<u2').tobytes())
+
+
+def test_depth_to_points_32fc1_matches_pinhole():
+    rng = np.random.default_rng(3)
+    depth = rng.uniform(0.5, 4.0, (K_SMALL.height, K_SMALL.width)).astype(np.float32)
+    points = depth_to_points(depth, K_SMALL)
+    assert points.shape == (K_SMALL.width * K_SMALL.height, 3)
+    assert points.dtype == np.float64
+    expected = [pinhole(u, v, float(depth[v, u])) for v in range(K_SMALL.height)
+                for u in range(K_SMALL.width)]
+    assert as_set(points) == as_set(expected)
+    # A few pixels by hand: the principal point lies on the optical axis.
+    depth[2, 3] = 2.0  # (u, v) = (3, 2): half a pixel off cx and cy
+    points = depth_to_points(depth, K_SMALL)
+    row = points[np.argmin(np.linalg.norm(points - pinhole(3, 2, 2.0), axis=1))]
+    np.testing.assert_allclose(row, [-0.5 * 2.0 / 50.0, -0.5 * 2.0 / 60.0, 2.0], atol=1e-12)
+
+
+def test_depth_to_points_16uc1_converted_to_metres():
+    mm = np.zeros((K_SMALL.height, K_SMALL.width), dtype=np.uint16)
+    mm[0, 0] = 1234
+    mm[5, 7] = 4000
+    mm[2, 4] = 65535  # sensor garbage beyond MAX_RANGE_M
+    depth = depth_image_to_array(_depth_msg(mm))
+    assert depth.dtype == np.float32
+    points = depth_to_points(depth, K_SMALL)
+    assert len(points) == 2  # zeros are no reading, 65.5 m is beyond range
+    expected = np.array([pinhole(0, 0, 1.234), pinhole(7, 5, 4.0)])
+    got = points[np.argsort(points[:, 2])]
+    np.testing.assert_allclose(got, expected, atol=1e-6)  # float32 millimetres
+
+
+@pytest.mark.parametrize('bad', [0.0, np.nan, np.inf, -np.inf, -1.0, MAX_RANGE_M + 0.5, 65.535])
+def test_depth_to_points_drops_invalid_pixels(bad):
+    depth = np.full((K_SMALL.height, K_SMALL.width), 2.0, dtype=np.float32)
+    depth[1, 1] = bad
+    depth[4, 6] = bad
+    points = depth_to_points(depth, K_SMALL)
+    assert len(points) == depth.size - 2
+    assert np.all(np.isfinite(points))
+    assert np.all(points[:, 2] == 2.0)
+    assert pinhole(1, 1, 2.0).round(9).tolist() not in points.round(9).tolist()
+
+
+def test_depth_to_points_keeps_the_full_range():
+    depth = np.full((K_SMALL.height, K_SMALL.width), np.nan, dtype=np.float32)
+    depth[0, 0] = 19.5
+    depth[0, 1] = 0.05
+    points = depth_to_points(depth, K_SMALL)
+    assert sorted(points[:, 2].round(5)) == [0.05, 19.5]
+
+
+def test_depth_to_points_stride_and_z_range():
+    depth = np.tile(np.linspace(0.5, 5.0, K_SMALL.width, dtype=np.float32),
+                    (K_SMALL.height, 1))
+    points = depth_to_points(depth, K_SMALL, stride=2)
+    expected = [pinhole(u, v, float(depth[v, u])) for v in range(0, K_SMALL.height, 2)
+                for u in range(0, K_SMALL.width, 2)]
+    assert as_set(points, 6) == as_set(expected, 6)
+    ranged = depth_to_points(depth, K_SMALL, z_range=(1.0, 3.0))
+    assert len(ranged) > 0
+    assert ranged[:, 2].min() >= 1.0
+    assert ranged[:, 2].max() <= 3.0
+    assert len(ranged) == np.count_nonzero((depth >= 1.0) & (depth <= 3.0))
+
+
+# ---------------------------------------------------------------------------------------------
+# box_mask
+# ---------------------------------------------------------------------------------------------
+
+def test_box_mask_keeps_the_inside_and_the_boundary():
+    p = EndeffParams(box_min_x=-1.0, box_max_x=1.0, box_min_y=-0.5, box_max_y=1.5,
+                     box_min_z=0.5, box_max_z=3.0)
+    points = np.array([
+        [0.0, 0.0, 1.0],     # inside
+        [-1.0, 1.5, 3.0],    # on the boundary (closed box)
+        [1.0, -0.5, 0.5],    # on the boundary
+        [1.01, 0.0, 1.0],    # right of the box
+        [-1.01, 0.0, 1.0],   # left
+        [0.0, -0.51, 1.0],   # above
+        [0.0, 1.51, 1.0],    # below
+        [0.0, 0.0, 0.49],    # too close
+        [0.0, 0.0, 3.01],    # too far
+    ])
+    assert box_mask(points, p).tolist() == [True, True, True] + [False] * 6
+
+
+def test_box_mask_random_points_agree_with_the_definition():
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-3, 5, (2000, 3))
+    p = EndeffParams()
+    inside = ((points[:, 0] >= p.box_min_x) & (points[:, 0] <= p.box_max_x)
+              & (points[:, 1] >= p.box_min_y) & (points[:, 1] <= p.box_max_y)
+              & (points[:, 2] >= p.box_min_z) & (points[:, 2] <= p.box_max_z))
+    assert 0 < inside.sum() < len(points)
+    np.testing.assert_array_equal(box_mask(points, p), inside)
+
+
+# ---------------------------------------------------------------------------------------------
+# fit_floor
+# ---------------------------------------------------------------------------------------------
+
+def _angle_deg(a, b):
+    cos = np.dot(a, b) / (np.linalg.norm(a) * np.linalg.norm(b))
+    return math.degrees(math.acos(min(1.0, abs(cos))))
+
+
+@pytest.mark.parametrize('rotvec', [
+    pytest.param((0.0, 0.0, 0.0), id='level'),
+    pytest.param((math.radians(10), 0.0, 0.0), id='pitched-down-10deg'),
+    pytest.param((math.radians(-6), 0.0, 0.0), id='pitched-up-6deg'),
+    pytest.param((0.0, 0.0, math.radians(10)), id='rolled-10deg'),
+    pytest.param((math.radians(8), 0.0, math.radians(-8)), id='pitched-and-rolled-8deg'),
+])
+def test_fit_floor_finds_a_tilted_floor(rotvec):
+    height = 1.1
+    rotation = Rotation.from_rotvec(rotvec).as_matrix()
+    scene = rotate_about_camera(shapes.person('arms_down', seed=2), rotation, height)
+    points = scene_points(scene, height)
+    floor = fit_floor(points, rng=np.random.default_rng(0), **floor_args())
+    assert floor is not None
+    # World up is optical -y; the turned camera sees it as rotation @ (0, -1, 0); the camera
+    # centre is `height` above the floor.
+    up = rotation @ np.array([0.0, -1.0, 0.0])
+    assert _angle_deg(floor.normal, up) < 1.0
+    assert floor.normal @ up > 0  # oriented upwards
+    assert np.linalg.norm(floor.normal) == pytest.approx(1.0)
+    assert floor.offset == pytest.approx(height, abs=0.01)
+    # The floor's points are the ones it explains: the lowest visible points are on it.
+    heights = floor.distance(points)
+    assert np.count_nonzero(heights < -3 * EndeffParams().floor_distance) == 0
+
+
+def test_foreground_cloud_removes_the_tilted_floor_and_reports_it():
+    height = 1.1
+    rotation = Rotation.from_rotvec((math.radians(10), 0.0, 0.0)).as_matrix()
+    scene = rotate_about_camera(shapes.person('t_pose', seed=1), rotation, height)
+    depth, _ = shapes.render(scene, camera_height=height)
+    params = EndeffParams()
+    points, floor = foreground_cloud(depth, shapes.K640, params)
+    assert floor is not None
+    assert _angle_deg(floor.normal, rotation @ [0.0, -1.0, 0.0]) < 1.0
+    assert np.all(floor.distance(points) > params.floor_distance - 1e-9)
+    # What is left is the person: from just above the floor to the top of the head (1.74 m).
+    heights = floor.distance(points)
+    assert heights.max() == pytest.approx(1.74, abs=0.05)
+    assert heights.min() < 0.08  # feet are kept (they stand on the floor)
+
+
+def test_fit_floor_none_for_a_floating_star():
+    points = scene_points(shapes.star(5, seed=1))
+    assert len(points) > 1000
+    assert fit_floor(points, rng=np.random.default_rng(0), **floor_args()) is None
+
+
+def _table(top_y=0.75, seed=0):
+    """A table without a floor: a flat 1.2 x 0.8 m top on four legs (the legs are below it)."""
+    rng = np.random.default_rng(seed)
+    s = shapes.Scene([], [])
+    s.add_box([-0.6, top_y - 0.03, 2.0], [0.6, top_y, 2.8], rng, density=4e5)
+    for x in (-0.55, 0.55):
+        for z in (2.05, 2.75):
+            s.add_capsule([x, 0.0, z], [x, top_y - 0.03, z], 0.035, rng)
+    return s
+
+
+def test_fit_floor_none_when_the_only_horizontal_surface_has_points_below():
+    points = scene_points(_table())
+    params = EndeffParams()
+    # Premise: the table top alone would qualify as a floor by size and tilt (it holds more
+    # than floor_min_fraction of the points, and it is level) ...
+    top = FloorPlane(np.array([0.0, -1.0, 0.0]), 1.1 - 0.75)
+    on_top = np.abs(top.distance(points)) < params.floor_distance
+    assert on_top.mean() > params.floor_min_fraction
+    # ... but the legs are below it, so it is not the floor.
+    assert np.count_nonzero(top.distance(points) < -0.1) > 0.1 * len(points)
+    assert fit_floor(points, rng=np.random.default_rng(0), **floor_args()) is None
+
+
+def test_fit_floor_prefers_the_floor_under_a_table():
+    scene = _table()
+    scene.add_floor(np.random.default_rng(1))
+    floor = fit_floor(scene_points(scene), rng=np.random.default_rng(0), **floor_args())
+    assert floor is not None
+    assert _angle_deg(floor.normal, [0.0, -1.0, 0.0]) < 1.0
+    assert floor.offset == pytest.approx(1.1, abs=0.01)
+
+
+def test_fit_floor_rejects_walls_and_tiny_inputs():
+    rng = np.random.default_rng(7)
+    wall = np.stack([rng.uniform(-1, 1, 3000), rng.uniform(-1, 1, 3000),
+                     np.full(3000, 3.0)], axis=1)  # facing the camera
+    assert fit_floor(wall, rng=np.random.default_rng(0), **floor_args()) is None
+    assert fit_floor(wall[:2], **floor_args()) is None
+
+
+# ---------------------------------------------------------------------------------------------
+# voxel_downsample
+# ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize('size', [0.01, 0.025, 0.07])
+def test_voxel_downsample_reduces_and_keeps_the_means(size):
+    rng = np.random.default_rng(11)
+    points = rng.uniform([-0.4, -0.3, 1.5], [0.4, 0.5, 2.2], (4000, 3))
+    out = voxel_downsample(points, size)
+    cells = np.floor(points / size).astype(np.int64)
+    keys, inverse, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    assert len(out) == len(keys) < len(points)
+    means = np.stack([np.bincount(inverse, weights=points[:, a]) / counts for a in range(3)], 1)
+    assert as_set(out, 9) == as_set(means, 9)
+    # Every output point lies in its cell; the count-weighted mean is the input mean.
+    out_cells = np.floor(out / size).astype(np.int64)
+    assert {tuple(c) for c in out_cells} == {tuple(c) for c in keys}
+    order = np.lexsort(np.flipud(out_cells.T))
+    np.testing.assert_allclose((out[order] * counts[:, None]).sum(0) / counts.sum(),
+                               points.mean(0), atol=1e-12)
+
+
+def test_voxel_downsample_off_and_empty():
+    points = np.random.default_rng(1).normal(size=(50, 3))
+    assert voxel_downsample(points, 0.0) is points
+    assert voxel_downsample(np.zeros((0, 3)), 0.05).shape == (0, 3)
+
+
+def test_voxel_downsample_points_of_one_cell_collapse_to_their_mean():
+    points = np.array([[0.01, 0.01, 1.01], [0.03, 0.02, 1.04], [0.02, 0.04, 1.03],
+                       [0.26, 0.01, 1.01]])
+    out = voxel_downsample(points, 0.05)
+    assert as_set(out) == as_set([points[:3].mean(0), points[3]])
+
+
+# ---------------------------------------------------------------------------------------------
+# Bad inputs
+# ---------------------------------------------------------------------------------------------
+
+DEPTH = np.full((480, 640), 2.0, dtype=np.float32)
+
+
+@pytest.mark.parametrize('make, message', [
+    pytest.param(lambda: Intrinsics(0.0, 525.0, 319.5, 239.5, 640, 480),
+                 r'intrinsics are unusable: fx=0\.0', id='fx-zero'),
+    pytest.param(lambda: Intrinsics(525.0, -1.0, 319.5, 239.5, 640, 480),
+                 r'intrinsics are unusable.*fy=-1\.0', id='fy-negative'),
+    pytest.param(lambda: Intrinsics(math.nan, 525.0, 319.5, 239.5, 640, 480),
+                 r'intrinsics are unusable: fx=nan', id='fx-nan'),
+    pytest.param(lambda: Intrinsics(525.0, 525.0, math.inf, 239.5, 640, 480),
+                 r'intrinsics are unusable.*cx=inf', id='cx-inf'),
+    pytest.param(lambda: Intrinsics.from_k(np.zeros(9), 640, 480),
+                 r'intrinsics are unusable.*calibrated', id='k-zeros'),
+    pytest.param(lambda: Intrinsics.from_k(np.zeros(8), 640, 480),
+                 r'K must have 9 elements, got 8', id='k-size'),
+    pytest.param(lambda: Intrinsics(525.0, 525.0, 319.5, 239.5, 0, 480),
+                 r'empty image size 0x480', id='empty-size'),
+])
+def test_bad_intrinsics(make, message):
+    with pytest.raises(InputError, match=message):
+        make()
+
+
+@pytest.mark.parametrize('make, message', [
+    pytest.param(lambda: RGBDFrame(0, 'cam', DEPTH[:240, :320], shapes.K640),
+                 r'depth image is 320x240 but camera info says 640x480',
+                 id='frame-depth-vs-intrinsics'),
+    pytest.param(lambda: RGBDFrame(0, 'cam', DEPTH, shapes.K640,
+                                   color=np.zeros((240, 320, 3), np.uint8)),
+                 r'colour image is 320x240 but depth is 640x480', id='frame-colour-vs-depth'),
+    pytest.param(lambda: RGBDFrame(0, 'cam', DEPTH[:, :, None], shapes.K640),
+                 r'depth must be a 2-D image, got shape \(480, 640, 1\)', id='frame-3d-depth'),
+    pytest.param(lambda: depth_to_points(DEPTH[:, :320], shapes.K640),
+                 r'depth image is 320x480 but the intrinsics are for 640x480',
+                 id='points-depth-vs-intrinsics'),
+    pytest.param(lambda: depth_to_points(DEPTH[0], shapes.K640),
+                 r'depth must be 2-D, got shape \(640,\)', id='points-1d-depth'),
+    pytest.param(lambda: depth_to_points(np.full((480, 640), 2000, np.uint16), shapes.K640),
+                 r'depth must be float metres, got dtype uint16', id='points-uint16-depth'),
+    pytest.param(lambda: depth_to_points(np.full((480, 640), 2, np.int32), shapes.K640),
+                 r'depth must be float metres, got dtype int32', id='points-int32-depth'),
+])
+def test_bad_frames(make, message):
+    with pytest.raises(InputError, match=message):
+        make()
+
+
+def test_good_frame_with_colour_is_accepted():
+    frame = RGBDFrame(0, 'cam', DEPTH, shapes.K640, color=np.zeros((480, 640, 3), np.uint8))
+    assert frame.depth.shape == (480, 640)
+
+
+@pytest.mark.parametrize('changes, message', [
+    ({'band_delta': 0.0}, r'band_delta=0\.0 is outside \[0\.005, 1\.0\]'),
+    ({'band_eta': 0}, r'band_eta=0 is outside'),
+    ({'attach_points': 0}, r'attach_points=0 is outside'),
+    ({'voxel_size': 0.5}, r'voxel_size=0\.5 is outside'),
+    ({'pixel_stride': 9}, r'pixel_stride=9 is outside'),
+    ({'memory_sigma': 1.5}, r'memory_sigma=1\.5 is outside'),
+    ({'min_geodesic': -0.1}, r'min_geodesic=-0\.1 is outside'),
+    ({'box_min_x': 1.0, 'box_max_x': 0.5}, r'box_min_x must be smaller than box_max_x'),
+    ({'box_min_z': 3.0, 'box_max_z': 3.0}, r'box_min_z must be smaller than box_max_z'),
+    ({'flow_method': 'ldof'}, r"flow_method must be 'dis' or 'farneback'"),
+])
+def test_out_of_range_parameters(changes, message):
+    with pytest.raises(ParameterError, match=message):
+        EndeffParams(**changes)
+    with pytest.raises(ParameterError, match=message):
+        EndeffParams().replace(**changes)
+
+
+def test_parameter_dict_errors():
+    with pytest.raises(ParameterError, match=r'unknown parameter\(s\): no_such_thing'):
+        EndeffParams.from_dict({'no_such_thing': 1})
+    with pytest.raises(ParameterError, match=r'parameter band_eta must be int'):
+        EndeffParams.from_dict({'band_eta': 2.5})
+    assert EndeffParams.from_dict({'band_delta': 1}).band_delta == 1.0

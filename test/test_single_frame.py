@@ -1,0 +1,760 @@
+"""Section 4 of the core: bands (Eqs. 1-4), topology graph (Eqs. 5-7) and the single-frame
+estimator on synthetic depth frames with known end-effectors.
+
+Scenes come from :mod:`shapes` (capsule bodies z-buffered into a 640x480 depth image); every
+random draw is seeded, so each case is deterministic. Tips are matched to candidates one to
+one (Hungarian matching on the Euclidean distance).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+import pytest
+import shapes
+from scipy import sparse
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse import csgraph
+from scipy.spatial.transform import Rotation
+
+from endeff_ros.core.bands import (
+    UNREACHED,
+    Neighbours,
+    density_mask,
+    expand_bands,
+    split_subbands,
+)
+from endeff_ros.core.cloud import foreground_cloud
+from endeff_ros.core.graph import (
+    TopologyGraph,
+    approximate_geodesic,
+    build_graph,
+    find_end_effectors,
+    geodesic,
+)
+from endeff_ros.core.params import EndeffParams
+from endeff_ros.core.single_frame import estimate_frame, estimate_points
+from endeff_ros.core.types import RGBDFrame
+
+TIP_TOLERANCE = 0.05  # m, Hungarian-matched tip to candidate
+
+
+def match(tips, candidates):
+    """Hungarian matching: (tip index, candidate index, distance) arrays."""
+    tips, candidates = np.asarray(tips).reshape(-1, 3), np.asarray(candidates).reshape(-1, 3)
+    if len(tips) == 0 or len(candidates) == 0:
+        return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
+    d = np.linalg.norm(tips[:, None] - candidates[None], axis=2)
+    rows, cols = linear_sum_assignment(d)
+    return rows, cols, d[rows, cols]
+
+
+def tip_errors(tips, candidates):
+    """Per-tip distance to its matched candidate (inf for tips left without one)."""
+    rows, _, dist = match(tips, candidates)
+    errors = np.full(len(tips), np.inf)
+    errors[rows] = dist
+    return errors
+
+
+def set_distance(a, b):
+    """Largest matched distance between two point sets of the same size (inf otherwise)."""
+    a, b = np.asarray(a).reshape(-1, 3), np.asarray(b).reshape(-1, 3)
+    if len(a) != len(b):
+        return math.inf
+    return float(match(a, b)[2].max()) if len(a) else 0.0
+
+
+def segment_distance(p, a, b):
+    """Distance from point ``p`` to segment ``ab``."""
+    p, a, b = (np.asarray(v, float) for v in (p, a, b))
+    ab = b - a
+    t = np.clip((p - a) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
+    return float(np.linalg.norm(p - (a + t * ab)))
+
+
+def frame(depth):
+    return RGBDFrame(stamp_ns=0, frame_id='camera', depth=depth, intrinsics=shapes.K640)
+
+
+def rotate_about_camera(scene, rotation, camera_height):
+    """The scene moved by ``rotation`` about the optical centre (optical frame), i.e. the
+    same scene seen by a camera turned by the inverse rotation."""
+
+    def move(p):
+        return shapes.to_optical(shapes.to_optical(p, camera_height) @ rotation.T, camera_height)
+
+    return shapes.Scene([move(s) for s in scene.samples], [move(t)[0] for t in scene.tips])
+
+
+# ---------------------------------------------------------------------------------------------
+# Synthetic scenes with known tips
+# ---------------------------------------------------------------------------------------------
+
+CAMERA_HEIGHT = {'chair': 0.4}  # chair: low camera, so the seat hides no leg (see shapes.chair)
+
+
+def _optical(p, camera_height):
+    return shapes.to_optical(p, camera_height)[0]
+
+
+def _star_root_ok(root):
+    centre = _optical([0.0, 1.2, 2.5], 1.1)
+    # Within the central ball (radius 0.14) + 5 cm.
+    return np.linalg.norm(root - centre), 0.14 + 0.05
+
+
+def _person_root_ok(root, camera_height=1.1, x=0.0, z=2.8):
+    # Massive part: torso (axis y 0.95..1.40, radius 0.15) and pelvis (y 0.98, radius 0.13).
+    a = _optical([x, 0.95, z], camera_height)
+    b = _optical([x, 1.40, z], camera_height)
+    # Within the torso capsule + 5 cm, and within 0.3 m of the torso axis centre.
+    centre_ok = np.linalg.norm(root - (a + b) / 2) <= 0.3
+    return segment_distance(root, a, b) if centre_ok else np.inf, 0.15 + 0.05
+
+
+def _chair_root_ok(root, yaw, z=2.4, camera_height=0.4):
+    # Back to the chair's own frame (x right, y up, z back; the seat is at y = 0.5 m).
+    world = np.array([root[0], camera_height - root[1], root[2] - z])
+    c, s = math.cos(yaw), math.sin(yaw)
+    px, pz = c * world[0] - s * world[2], s * world[0] + c * world[2]
+    # Seat region: the 0.4 x 0.4 m frame (capsules of radius 3.5 cm) + 5 cm, and within 15 cm
+    # of the seat's height (0.5 m).
+    outside = max(abs(px) - 0.25, abs(pz) - 0.25, abs(world[1] - 0.5) - 0.15, 0.0)
+    return outside, 1e-9
+
+
+def _arm_root_ok(root, camera_height=1.1, z=2.4):
+    base = np.array([-0.3, 0.0, z])
+    joints = [base + [0, 0.03, 0], base + [0, 0.6, 0], base + [0.35, 0.95, 0],
+              base + [0.75, 0.85, 0], base + [0.95, 0.55, 0]]
+    joints = [_optical(j, camera_height) for j in joints]
+    # On the chain: within the thickest link radius (8 cm) + 5 cm of its axis.
+    d = min(segment_distance(root, a, b) for a, b in zip(joints[:-1], joints[1:]))
+    return d, 0.08 + 0.05
+
+
+def _make(kind, arg, seed):
+    if kind == 'star':
+        return shapes.star(arg, seed=seed)
+    if kind == 'person':
+        return shapes.person(arg, seed=seed)
+    if kind == 'chair':
+        return shapes.chair(yaw=arg, seed=seed)
+    return shapes.robot_arm(seed=seed)
+
+
+@functools.cache
+def rendered(kind, arg, seed):
+    """(depth, tips) of a scene, rendered once per test session."""
+    return shapes.render(_make(kind, arg, seed), camera_height=CAMERA_HEIGHT.get(kind, 1.1))
+
+
+@functools.cache
+def estimated(kind, arg, seed):
+    depth, tips = rendered(kind, arg, seed)
+    return estimate_frame(frame(depth), EndeffParams()), tips
+
+
+def _xfail(reason):
+    return pytest.mark.xfail(strict=True, reason=reason)
+
+
+HEAD_OFF = (
+    'head candidate {:.3f} m from the head centre, almost all of it too deep (+{:.2f} m in z, '
+    '3.6 cm too high): the camera (1.1 m) sees the top of the head edge-on and _tip_position '
+    'adds the part radius along the viewing ray to a surface centroid that already lies at the '
+    'back of the head (with max_part_radius=0 the error is 0.056 m); hands and feet are within '
+    '5 cm (test_person_hands_and_feet)')
+
+#: Measured failures with the default parameters (strict: a fix makes them XPASS and fail).
+TIP_XFAILS = {
+    't_pose-seed0': _xfail(HEAD_OFF.format(0.118, 0.11)),
+    't_pose-seed1': _xfail(HEAD_OFF.format(0.108, 0.10)),
+    'arms_down-seed0': _xfail(HEAD_OFF.format(0.118, 0.11)),
+    'arms_down-seed1': _xfail(HEAD_OFF.format(0.105, 0.10)),
+    'chair-yaw0.5-seed0': _xfail(
+        'the foot of the back-left leg (under the backrest post, tip (-0.08, 0.34, 2.671)) is '
+        'not found (5 candidates for 6 tips): the leg is banded (bands 28-33) but its sub-bands '
+        'are not attached to the rest of the graph, so their geodesic to the root is inf; the '
+        'leg is visible (82 points within 7 cm of the tip)'),
+    'chair-yaw0.5-seed1': _xfail(
+        'foot of the back-right leg (tip (0.271, 0.34, 2.48)) found 0.056 m away (> 0.05); '
+        'the other 5 tips within 0.043 m'),
+    'robot_arm-seed1': _xfail(
+        'pedestal foot (tip (-0.3, 1.0, 2.4)) found 0.051 m away at (-0.32, 1.014, 2.445), '
+        'mostly too deep; gripper within 0.041 m'),
+}
+
+
+CASES = [
+    *(pytest.param('star', n, seed, id=f'star{n}-seed{seed}') for n in (3, 4, 5, 6)
+      for seed in (0, 1)),
+    *(pytest.param('person', pose, seed, id=f'{pose}-seed{seed}')
+      for pose in ('t_pose', 'arms_down') for seed in (0, 1)),
+    # The chair as shapes.chair() draws it (yaw 0.5) and turned the other way.
+    *(pytest.param('chair', yaw, seed, id=f'chair-yaw{yaw}-seed{seed}') for yaw in (0.5, -0.5)
+      for seed in (0, 1)),
+    *(pytest.param('arm', None, seed, id=f'robot_arm-seed{seed}') for seed in (0, 1)),
+]
+
+
+def _with_marks(cases, marks):
+    out = []
+    for case in cases:
+        mark = marks.get(case.id)
+        out.append(pytest.param(*case.values, id=case.id, marks=mark or ()))
+    return out
+
+
+TIP_CASES = _with_marks(CASES, TIP_XFAILS)
+
+
+def test_scenes_are_visible():
+    """Premise of the scene tests: every tip projects inside the image, in front of the camera."""
+    for case in CASES:
+        _, tips = rendered(*case.values)
+        uv = shapes.K640.project(tips)
+        assert np.all(tips[:, 2] > 0.5), case.id
+        assert np.all((uv >= 5) & (uv < [shapes.K640.width - 5, shapes.K640.height - 5])), case.id
+
+
+@pytest.mark.parametrize('kind, arg, seed', TIP_CASES)
+def test_every_tip_found_within_5cm(kind, arg, seed):
+    est, tips = estimated(kind, arg, seed)
+    errors = tip_errors(tips, est.positions())
+    assert np.all(errors < TIP_TOLERANCE), f'tip errors {np.round(errors, 3)}'
+
+
+@pytest.mark.parametrize('kind, arg, seed', CASES)
+def test_nothing_else_is_reported(kind, arg, seed):
+    """One entity and no extra candidate: at most one per tip (a missed tip is the business
+    of test_every_tip_found_within_5cm)."""
+    est, tips = estimated(kind, arg, seed)
+    assert len(est.entities) == 1
+    assert len(est.positions()) <= len(tips), np.round(est.positions(), 3)
+
+
+@pytest.mark.parametrize('kind, arg, seed', CASES)
+def test_root_lies_in_the_massive_part(kind, arg, seed):
+    est, _ = estimated(kind, arg, seed)
+    assert len(est.entities) >= 1
+    root = est.entities[0].root
+    if kind == 'chair':
+        distance, limit = _chair_root_ok(root, yaw=arg)
+    else:
+        check = {'star': _star_root_ok, 'person': _person_root_ok, 'arm': _arm_root_ok}[kind]
+        distance, limit = check(root)
+    assert distance <= limit, f'root {np.round(root, 3)}: {distance:.3f} > {limit:.3f}'
+    # The root is a foreground point of its entity.
+    assert np.min(np.linalg.norm(est.points - root, axis=1)) < 1e-9
+
+
+@pytest.mark.parametrize('pose', ['t_pose', 'arms_down'])
+@pytest.mark.parametrize('seed', [0, 1])
+def test_person_hands_and_feet(pose, seed):
+    """Hands and both feet within 5 cm; the feet, standing on the floor, stay two separate
+    ends after floor removal (one candidate each)."""
+    est, tips = estimated('person', pose, seed)
+    assert est.floor is not None
+    assert est.floor.normal @ [0.0, -1.0, 0.0] > math.cos(math.radians(1.0))
+    assert est.floor.offset == pytest.approx(1.1, abs=0.01)
+    rows, cols, dist = match(tips, est.positions())
+    by_tip = dict(zip(rows.tolist(), zip(cols.tolist(), dist.tolist())))
+    hands_feet = [1, 2, 3, 4]  # tips: head, hands (x<0, x>0), feet (x<0, x>0)
+    for t in hands_feet:
+        assert t in by_tip and by_tip[t][1] < TIP_TOLERANCE, (t, by_tip.get(t))
+    left_foot, right_foot = by_tip[3][0], by_tip[4][0]
+    assert left_foot != right_foot
+    # The feet are 0.3 m apart; each candidate is on its own side.
+    positions = est.positions()
+    assert positions[left_foot][0] < -0.08 and positions[right_foot][0] > 0.08
+
+
+# ---------------------------------------------------------------------------------------------
+# Camera motion on the depth path (approximate: pixels and voxels do not move with the scene)
+# ---------------------------------------------------------------------------------------------
+
+TURNS = {'pitch-down': (math.radians(10), 0.0, 0.0), 'pitch-up': (math.radians(-10), 0.0, 0.0),
+         'yaw': (0.0, math.radians(10), 0.0), 'roll': (0.0, 0.0, math.radians(10))}
+TURN_XFAILS = {
+    'star4-pitch-down': _xfail(
+        'one limb tip found 0.053 m away (> 0.05); the other three within 0.036 m (the same '
+        'star seen by a level camera: all within 0.04 m)'),
+}
+
+
+@pytest.mark.parametrize('rotvec, n', [
+    pytest.param(rotvec, n, id=f'star{n}-{name}', marks=TURN_XFAILS.get(f'star{n}-{name}', ()))
+    for n in (4, 5) for name, rotvec in TURNS.items()])
+def test_star_seen_by_a_turned_camera(rotvec, n):
+    rotation = Rotation.from_rotvec(rotvec).as_matrix()
+    depth, tips = shapes.render(rotate_about_camera(shapes.star(n, seed=2), rotation, 1.1))
+    est = estimate_frame(frame(depth), EndeffParams())
+    assert est.floor is None
+    assert len(est.positions()) == n
+    errors = tip_errors(tips, est.positions())
+    assert np.all(errors < TIP_TOLERANCE), np.round(errors, 3)
+
+
+@pytest.mark.parametrize('seed', [
+    pytest.param(0, marks=_xfail(
+        'the front-left leg foot (tip (-0.271, 0.34, 2.32) in the level camera) is found '
+        '0.054 m away (> 0.05); the other 5 tips within 0.049 m')),
+    1,
+])
+def test_chair_seen_by_a_camera_pitched_down(seed):
+    rotation = Rotation.from_rotvec((math.radians(10), 0.0, 0.0)).as_matrix()
+    depth, tips = shapes.render(rotate_about_camera(shapes.chair(seed=seed), rotation, 0.4),
+                                camera_height=0.4)
+    uv = shapes.K640.project(tips)
+    assert np.all((uv >= 0) & (uv < [640, 480]))  # premise: every tip is in view
+    est = estimate_frame(frame(depth), EndeffParams())
+    assert len(est.positions()) == len(tips)
+    assert np.all(tip_errors(tips, est.positions()) < TIP_TOLERANCE)
+
+
+# ---------------------------------------------------------------------------------------------
+# Invariance (estimate_points on clouds: the well-posed path)
+# ---------------------------------------------------------------------------------------------
+
+INVARIANCE_SCENES = [
+    pytest.param('star', 5, 0, id='star5'),
+    pytest.param('person', 't_pose', 0, id='t_pose'),
+    pytest.param('chair', 0.5, 0, id='chair'),
+    pytest.param('arm', None, 0, id='robot_arm'),
+]
+
+#: Section 4 on an already downsampled cloud: no voxel grid (not rotation invariant) and no
+#: floor fit (estimate_points never fits one).
+CLOUD_PARAMS = EndeffParams(voxel_size=0.0, floor_removal=False)
+
+
+@functools.cache
+def foreground(kind, arg, seed):
+    depth, _ = rendered(kind, arg, seed)
+    points, _ = foreground_cloud(depth, shapes.K640, EndeffParams())
+    return points
+
+
+@pytest.mark.parametrize('kind, arg, seed', INVARIANCE_SCENES)
+def test_point_order_does_not_matter(kind, arg, seed):
+    points = foreground(kind, arg, seed)
+    base = estimate_points(points, CLOUD_PARAMS)
+    assert len(base.positions()) >= 2
+    rng = np.random.default_rng(17)
+    for _ in range(3):
+        perm = rng.permutation(len(points))
+        shuffled = estimate_points(points[perm], CLOUD_PARAMS)
+        assert len(shuffled.positions()) == len(base.positions())
+        assert set_distance(shuffled.positions(), base.positions()) < 1e-3
+        np.testing.assert_allclose(shuffled.entities[0].root, base.entities[0].root, atol=1e-3)
+        # Per-point labels follow the points.
+        np.testing.assert_array_equal(shuffled.band, base.band[perm])
+
+
+def _random_rotation(rng, max_angle):
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    return Rotation.from_rotvec(axis * rng.uniform(0.3, 1.0) * max_angle).as_matrix()
+
+
+@pytest.mark.parametrize('kind, arg, seed', INVARIANCE_SCENES)
+def test_camera_rotation_about_its_centre_rotates_the_tips(kind, arg, seed):
+    """Turning the camera about its optical centre rotates the cloud and the viewing rays
+    alike, so even the view-dependent part-radius step commutes with it (default params)."""
+    points = foreground(kind, arg, seed)
+    base = estimate_points(points, CLOUD_PARAMS).positions()
+    rng = np.random.default_rng(23)
+    for _ in range(3):
+        rotation = _random_rotation(rng, math.radians(20))
+        moved = estimate_points(points @ rotation.T, CLOUD_PARAMS).positions()
+        assert set_distance(moved, base @ rotation.T) < 0.02
+
+
+@pytest.mark.parametrize('kind, arg, seed', INVARIANCE_SCENES)
+def test_rigid_motion_moves_the_tips(kind, arg, seed):
+    """Rotation + translation. The part-radius step pushes a tip along the viewing ray from the
+    camera origin, which a translation of the cloud does not carry along (measured up to
+    3.4 cm on the robot arm), so the geometric part is tested with max_part_radius = 0."""
+    params = CLOUD_PARAMS.replace(max_part_radius=0.0)
+    points = foreground(kind, arg, seed)
+    base = estimate_points(points, params).positions()
+    rng = np.random.default_rng(29)
+    for _ in range(3):
+        rotation = _random_rotation(rng, math.radians(30))
+        shift = rng.uniform(-0.5, 0.5, 3)
+        moved = estimate_points(points @ rotation.T + shift, params).positions()
+        assert set_distance(moved, base @ rotation.T + shift) < 0.02
+
+
+# ---------------------------------------------------------------------------------------------
+# Empty foreground
+# ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize('fill', [np.nan, 0.0, 30.0, 10.0])  # 10 m: valid but outside the box
+def test_empty_foreground_gives_no_entities(fill):
+    depth = np.full((480, 640), fill, dtype=np.float32)
+    est = estimate_frame(frame(depth), EndeffParams())
+    assert est.entities == []
+    assert est.positions().shape == (0, 3)
+    assert len(est.points) == 0
+    assert est.unreachable == 0
+
+
+def test_empty_cloud_gives_no_entities():
+    est = estimate_points(np.zeros((0, 3)), EndeffParams())
+    assert est.entities == []
+    assert est.positions().shape == (0, 3)
+
+
+def test_small_clusters_are_not_entities():
+    rng = np.random.default_rng(2)
+    blob = rng.normal([0.0, 0.0, 2.0], 0.02, (20, 3))  # dense, but < min_entity_points
+    est = estimate_points(blob, EndeffParams())
+    assert est.entities == []
+    assert np.all(est.entity == -1)
+    assert np.all(est.band == UNREACHED)
+
+
+# ---------------------------------------------------------------------------------------------
+# Bands (Eqs. 1-4) on hand-made clouds
+# ---------------------------------------------------------------------------------------------
+
+def _line(n, spacing, start=(0.0, 0.0, 2.0), direction=(1.0, 0.0, 0.0)):
+    return np.asarray(start) + np.arange(n)[:, None] * spacing * np.asarray(direction)
+
+
+@pytest.mark.parametrize('delta', [0.05, 0.07, 0.1])
+@pytest.mark.parametrize('seed_at', ['end', 'middle'])
+def test_bands_advance_about_delta_per_band(delta, seed_at):
+    spacing = 0.01
+    points = _line(151, spacing)
+    seed = 0 if seed_at == 'end' else 75
+    graph = Neighbours.build(points, delta)
+    dense = density_mask(graph, EndeffParams().band_eta)
+    assert dense.all()
+    band = expand_bands(graph, dense, np.array([seed]), delta)
+    assert band[seed] == 0
+    assert np.all(band >= 0)
+    sides = [np.arange(seed, len(points))] + ([np.arange(seed, -1, -1)] if seed else [])
+    for side in sides:  # the indices from the seed outwards
+        reach = np.abs(points[side, 0] - points[seed, 0])
+        labels = band[side]
+        # Bands grow monotonically away from the seed.
+        assert np.all(np.diff(labels) >= 0)
+        farthest = np.array([reach[labels == k].max() for k in range(labels.max() + 1)])
+        step = np.diff(farthest)[:-1]  # the last band is cut short by the end of the line
+        # Each band reaches up to δ_L past the previous contour, which lies at most one
+        # spacing (plus the ¾δ_L rim rule) inside the previous band's far edge.
+        assert np.all(step <= delta + 1e-9), step
+        assert np.all(step >= delta - 2 * spacing - 1e-9), step
+        assert np.mean(step) == pytest.approx(delta, abs=spacing)
+        assert labels.max() == pytest.approx(reach.max() / delta, abs=0.3 * reach.max() / delta)
+
+
+def test_sparse_points_are_not_banded():
+    points = _line(100, 0.01)
+    # Isolated points: a pair 2 cm apart far off the line, and a lone point.
+    isolated = np.array([[0.5, 0.4, 2.0], [0.52, 0.4, 2.0], [1.5, 0.0, 2.0]])
+    cloud = np.concatenate([points, isolated])
+    eta, delta = EndeffParams().band_eta, EndeffParams().band_delta
+    graph = Neighbours.build(cloud, delta)
+    dense = density_mask(graph, eta)
+    assert dense[:100].all()
+    assert not dense[100:].any()  # fewer than η_L neighbours
+    band = expand_bands(graph, dense, np.array([0]), delta)
+    assert np.all(band[:100] >= 0)
+    assert np.all(band[100:] == UNREACHED)
+    # Also through the estimator: not banded, and the counter agrees with the labels.
+    est = estimate_points(cloud, EndeffParams(min_entity_points=20))
+    assert len(est.entities) == 1
+    assert np.all(est.band[100:] == UNREACHED)
+    assert np.all(est.band[:100] != UNREACHED)
+    assert est.unreachable == np.count_nonzero((est.entity >= 0) & (est.band == UNREACHED))
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    'a sparse point beside an entity (within δ_L of its points, but with only 3 neighbours '
+    '< η_L = 4) is UNREACHED as it should be, but it is given entity -1 (entities hold dense '
+    'points only), so FrameEstimate.unreachable stays 0 instead of counting it '
+    '(measured: entity label -1, unreachable 0, expected >= 1)'))
+def test_sparse_points_of_an_entity_are_counted_unreachable():
+    points = _line(100, 0.01)
+    stray = np.array([[0.99 + 0.055, 0.0, 2.0]])  # beyond the end: neighbours at 5.5, 6.5 cm
+    cloud = np.concatenate([points, stray])
+    params = EndeffParams(min_entity_points=20)
+    graph = Neighbours.build(cloud, params.band_delta)
+    assert density_mask(graph, params.band_eta)[-1] == np.False_  # premise: it is sparse
+    assert graph.degree()[-1] >= 1  # ... and within δ_L of the entity
+    est = estimate_points(cloud, params)
+    assert est.band[-1] == UNREACHED
+    assert est.unreachable >= 1
+
+
+def test_leak_fallback_reaches_a_branch_joining_away_from_the_rim():
+    """A line with points every 3 cm and δ_L = 7 cm: contours are the even points (the rim of
+    each band is its point 6 cm out). A branch starts 6.6 cm beside an odd point: it is
+    within δ_L of that band point but 7.25 cm from the contours on either side, so the front
+    passes it by; only the leak fallback, once the front has died, can band it."""
+    delta, spacing = 0.07, 0.03
+    line = _line(21, spacing)  # x = 0 .. 0.6
+    attach = line[11]  # x = 0.33, between the contours at 0.30 and 0.36
+    branch = _line(10, spacing, start=attach + [0.0, 0.066, 0.0], direction=(0, 1, 0))
+    points = np.concatenate([line, branch])
+    graph = Neighbours.build(points, delta)
+    dense = density_mask(graph, 2)
+    assert dense.all()
+    # Premise: the branch touches the line only at its attachment point.
+    touching = np.linalg.norm(branch[:, None] - line[None], axis=2) < delta
+    assert touching.sum() == 1 and touching[0, 11]
+    band = expand_bands(graph, dense, np.array([0]), delta)
+    line_band, branch_band = band[:21], band[21:]
+    assert np.all(line_band >= 0)
+    assert np.all(branch_band != UNREACHED)
+    # Reached after the front along the line died: every branch band comes after the last
+    # line band, and the branch is banded outwards from the attachment point.
+    assert branch_band.min() > line_band.max()
+    assert np.all(np.diff(branch_band) >= 0)
+
+
+def test_split_subbands_separates_parallel_lines_farther_than_connect():
+    connect = 0.07
+    x = np.arange(0, 0.5, 0.01)
+    band_of = 1 + np.floor(x / 0.1).astype(int)
+    for gap, separate in ((0.1, True), (0.04, False)):
+        a = np.stack([x, np.zeros_like(x), np.full_like(x, 2.0)], 1)
+        b = a + [0.0, gap, 0.0]
+        points = np.concatenate([a, b])
+        band = np.concatenate([band_of, band_of])
+        graph = Neighbours.build(points, 0.12)
+        sub = split_subbands(points, graph, band, connect=connect, max_points=1000)
+        n_bands = len(np.unique(band_of))
+        assert np.all(sub >= 0)
+        # A sub-band never spans two bands.
+        for s in np.unique(sub):
+            assert len(np.unique(band[sub == s])) == 1
+        if separate:
+            assert len(np.unique(sub)) == 2 * n_bands
+            assert not set(sub[: len(x)]) & set(sub[len(x):])
+        else:
+            assert len(np.unique(sub)) == n_bands
+            np.testing.assert_array_equal(sub[: len(x)], sub[len(x):])
+
+
+@pytest.mark.parametrize('n, max_points', [(200, 60), (61, 60), (60, 60), (500, 25)])
+def test_split_subbands_caps_the_size(n, max_points):
+    rng = np.random.default_rng(n)
+    # One wide band: a strip 3 cm wide, a point every centimetre along x (no hole wider
+    # than `connect`, so it is one connected piece before the cap).
+    points = np.stack([np.arange(n) * 0.01, rng.uniform(0, 0.03, n), np.full(n, 2.0)], 1)
+    band = np.ones(n, dtype=np.intp)
+    graph = Neighbours.build(points, 0.07)
+    sub = split_subbands(points, graph, band, connect=0.07, max_points=max_points)
+    counts = np.bincount(sub)
+    assert len(counts) == math.ceil(n / max_points)
+    assert counts.max() <= max_points
+    assert counts.sum() == n
+    # Slices along the main axis (x): their x ranges do not overlap.
+    ranges = sorted((points[sub == s, 0].min(), points[sub == s, 0].max())
+                    for s in range(len(counts)))
+    assert all(hi < lo for (_, hi), (lo, _) in zip(ranges[:-1], ranges[1:]))
+
+
+def test_split_subbands_merges_slivers_and_skips_unreached():
+    x = np.arange(0, 0.3, 0.01)
+    points = np.stack([x, np.zeros_like(x), np.full_like(x, 2.0)], 1)
+    band = np.where(x < 0.2, 1, 2)
+    band[-3:] = UNREACHED
+    band[19] = 3  # a one-point sliver of its own band
+    graph = Neighbours.build(points, 0.07)
+    plain = split_subbands(points, graph, band, connect=0.07, max_points=100)
+    assert np.all(plain[-3:] == UNREACHED)
+    assert len(np.unique(plain[plain >= 0])) == 3
+    merged = split_subbands(points, graph, band, connect=0.07, max_points=100, min_points=2)
+    assert np.all(merged[-3:] == UNREACHED)
+    assert len(np.unique(merged[merged >= 0])) == 2
+    assert merged[19] in (merged[18], merged[20])
+
+
+# ---------------------------------------------------------------------------------------------
+# Graph (Eqs. 5-7)
+# ---------------------------------------------------------------------------------------------
+
+def test_build_graph_weights_are_centroid_distances():
+    rng = np.random.default_rng(4)
+    # A bent tube: bands and sub-bands from the real expansion.
+    t = np.linspace(0, 1, 400)
+    axis = np.stack([t, 0.3 * np.sin(3 * t), np.full_like(t, 2.0)], 1)
+    points = axis + rng.normal(0, 0.01, axis.shape)
+    params = EndeffParams()
+    graph = Neighbours.build(points, params.band_delta)
+    dense = density_mask(graph, params.band_eta)
+    band = expand_bands(graph, dense, np.array([0]), params.band_delta)
+    band[0] = 1  # as estimate_points: the seed joins the first band
+    sub = split_subbands(points, graph, band, connect=params.band_delta, max_points=60,
+                         min_points=params.subband_min_points)
+    g = build_graph(points, sub, band, graph, attach_distance=params.attach_distance,
+                    attach_points=params.attach_points)
+    k = sub.max() + 1
+    assert g.n_nodes == k
+    for s in range(k):
+        np.testing.assert_allclose(g.centroids[s], points[sub == s].mean(0), atol=1e-12)
+        assert g.sizes[s] == np.count_nonzero(sub == s)
+        assert g.band[s] in band[sub == s]  # merged slivers may bring a neighbouring band
+    rows, cols = g.weights.nonzero()
+    assert len(rows) >= 2 * (k - 1)  # a tube is connected from end to end
+    assert np.all(np.abs(g.band[rows] - g.band[cols]) <= 2)  # along the tube only
+    for i, j in zip(rows, cols):
+        assert g.weights[i, j] == pytest.approx(np.linalg.norm(g.centroids[i] - g.centroids[j]),
+                                                abs=1e-12)
+    assert (g.weights != g.weights.T).nnz == 0
+    dist, _ = g.shortest_paths([sub[0]])
+    assert np.all(np.isfinite(dist))
+
+
+def _two_subbands(near_points):
+    """Sub-band A (a sparse row) and B (a tight cluster) where ``near_points`` points of A are
+    within λ = 5 cm of B and all of B's points are within λ of A."""
+    a = [[x, 0.0, 2.0] for x in (0.0, 0.1, 0.2, 0.3)]
+    a += [[0.5 - 0.01 * i, 0.0, 2.0] for i in range(near_points)]
+    b = [[0.53, 0.0, 2.0], [0.535, 0.005, 2.0], [0.54, 0.0, 2.0], [0.535, -0.005, 2.0]]
+    points = np.array(a + b)
+    sub = np.array([0] * len(a) + [1] * len(b))
+    band = sub + 1
+    return points, sub, band
+
+
+@pytest.mark.parametrize('near_points, attach_points, attached', [
+    (1, 2, False),  # only one point of A is near B: not attached with P = 2
+    (1, 1, True),
+    (2, 2, True),
+    (2, 3, False),  # B has 4 near points but A only 2
+])
+def test_attachment_needs_p_points_on_both_sides(near_points, attach_points, attached):
+    points, sub, band = _two_subbands(near_points)
+    graph = Neighbours.build(points, 0.06)
+    g = build_graph(points, sub, band, graph, attach_distance=0.05,
+                    attach_points=attach_points)
+    assert (g.weights[0, 1] > 0) == attached
+    assert (g.weights[1, 0] > 0) == attached
+
+
+def test_bridges_link_subbands_across_a_gap():
+    points, sub, band = _two_subbands(1)
+    graph = Neighbours.build(points, 0.06)
+    g = build_graph(points, sub, band, graph, attach_distance=0.05, attach_points=2,
+                    bridges=[(0, len(points) - 1)])
+    assert g.weights[0, 1] == pytest.approx(np.linalg.norm(g.centroids[0] - g.centroids[1]))
+
+
+def make_graph(centroids, edges):
+    """A TopologyGraph over ``centroids`` with Eq. 5 weights on ``edges`` (i, j)."""
+    centroids = np.asarray(centroids, float)
+    k = len(centroids)
+    i, j = (np.asarray(v, dtype=np.intp) for v in zip(*edges)) if edges else ([], [])
+    w = np.linalg.norm(centroids[i] - centroids[j], axis=1)
+    weights = sparse.csr_matrix((np.r_[w, w], (np.r_[i, j], np.r_[j, i])), shape=(k, k))
+    dist, pred = csgraph.shortest_path(weights, method='D', directed=False,
+                                       return_predecessors=True)
+    return TopologyGraph(centroids, np.ones(k, dtype=np.intp), np.zeros(k, dtype=np.intp),
+                         weights, dist, pred)
+
+
+def _y_graph():
+    """Root at the junction, arms of 0.7, 0.6 and 0.5 m (nodes every 0.1 m) and a 0.2 m twig
+    off the middle of the longest arm. Returns the graph and the leaf node of each arm."""
+    centroids = [np.zeros(3)]
+    edges = []
+    leaves = {}
+
+    def arm(start, direction, length, name):
+        prev = start
+        direction = np.asarray(direction, float) / np.linalg.norm(direction)
+        base = centroids[start]
+        for step in range(1, int(round(length / 0.1)) + 1):
+            centroids.append(base + 0.1 * step * direction)
+            edges.append((prev, len(centroids) - 1))
+            prev = len(centroids) - 1
+        leaves[name] = prev
+
+    for name, length, angle in (('a', 0.7, 90), ('b', 0.6, 210), ('c', 0.5, 330)):
+        rad = math.radians(angle)
+        arm(0, (math.cos(rad), math.sin(rad), 0), length, name)
+    arm(3, (1, 0, 0), 0.2, 'twig')  # node 3 is 0.3 m up arm a
+    return make_graph(centroids, edges), leaves
+
+
+def test_find_end_effectors_on_a_y_graph():
+    g, leaves = _y_graph()
+    found = find_end_effectors(g, 0, min_geodesic=0.3, max_count=12)
+    # The three leaves, farthest first; the 0.2 m twig is below g and stops the search.
+    assert [node for node, _, _ in found] == [leaves['a'], leaves['b'], leaves['c']]
+    for (node, path, protrusion), length in zip(found, (0.7, 0.6, 0.5)):
+        assert path[0] == node and path[-1] == 0
+        # Found from the root and the earlier paths (all meeting at the root): the full arm.
+        assert protrusion == pytest.approx(length)
+        assert geodesic(g, path) == pytest.approx(length)
+        assert len(path) == round(length / 0.1) + 1
+
+
+@pytest.mark.parametrize('min_geodesic, max_count, expected', [
+    (0.55, 12, ['a', 'b']),         # c (0.5 m from the found paths) is below g
+    (0.15, 12, ['a', 'b', 'c', 'twig']),
+    (0.3, 2, ['a', 'b']),           # capped
+    (0.8, 12, []),
+])
+def test_find_end_effectors_stops_below_g(min_geodesic, max_count, expected):
+    g, leaves = _y_graph()
+    found = find_end_effectors(g, 0, min_geodesic=min_geodesic, max_count=max_count)
+    assert [node for node, _, _ in found] == [leaves[name] for name in expected]
+    # Every protrusion (distance to the target set when found) is at least g, decreasing.
+    protrusions = [p for _, _, p in found]
+    assert all(p >= min_geodesic for p in protrusions)
+    assert protrusions == sorted(protrusions, reverse=True)
+    if 'twig' in expected:
+        assert protrusions[-1] == pytest.approx(0.2)  # from the middle of arm a
+
+
+def test_geodesics_eqs_6_and_7():
+    g, leaves = _y_graph()
+    found = {node: path for node, path, _ in find_end_effectors(g, 0, min_geodesic=0.3,
+                                                                max_count=12)}
+    root = g.centroids[0]
+    for name, length in (('a', 0.7), ('b', 0.6), ('c', 0.5)):
+        path = found[leaves[name]]
+        assert geodesic(g, path) == pytest.approx(length)  # Eq. 6
+        position = g.centroids[leaves[name]] + [0.0, 0.0, 0.05]
+        mid = g.centroids[path[len(path) // 2]]
+        expected = np.linalg.norm(position - mid) + np.linalg.norm(mid - root)  # Eq. 7
+        assert approximate_geodesic(position, g, path, root) == pytest.approx(expected)
+    # On a straight path Eq. 7 equals the path length.
+    path = found[leaves['a']]
+    assert approximate_geodesic(g.centroids[path[0]], g, path, root) == pytest.approx(0.7)
+
+
+def test_approximate_geodesic_uses_the_middle_node_by_count():
+    centroids = np.array([[0.0, 0, 0], [0.3, 0, 0], [0.3, 0.4, 0], [0.3, 0.9, 0]])
+    g = make_graph(centroids, [(0, 1), (1, 2), (2, 3)])
+    path = np.array([3, 2, 1, 0])  # mid = path[2] = node 1
+    e = np.array([0.3, 1.0, 0.0])
+    assert approximate_geodesic(e, g, path, centroids[0]) == pytest.approx(1.0 + 0.3)
+
+
+def test_candidates_carry_consistent_geodesics():
+    est, _ = estimated('star', 5, 0)
+    entity = est.entities[0]
+    g = entity.graph
+    for c in entity.candidates:
+        assert c.path.shape[1] == 3
+        np.testing.assert_allclose(c.path[0], g.centroids[c.node])
+        assert c.geodesic == pytest.approx(np.linalg.norm(np.diff(c.path, axis=0), axis=1).sum())
+        mid = c.path[len(c.path) // 2]
+        assert c.geodesic_approx == pytest.approx(
+            np.linalg.norm(c.position - mid) + np.linalg.norm(mid - entity.root))
+        # Eq. 6 is at least the straight line from the end-effector node to the root node,
+        # and at least g (the search stops below it).
+        assert c.geodesic >= np.linalg.norm(c.path[0] - c.path[-1]) - 1e-9
+        assert c.geodesic >= EndeffParams().min_geodesic
