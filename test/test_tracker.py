@@ -1,0 +1,441 @@
+"""The Section 5 tracker on short rendered sequences: the situations the paper describes.
+
+Each test renders a short capsule animation (:mod:`scenarios`, depth only: zero-motion
+prediction), runs :class:`Tracker` and, where the scenario needs it, the single-frame
+estimator alone, and checks the tracker against the known tips. Parameters a test depends on
+(T = ``keep_frames``, and ``max_rectify_distance`` where a prediction must stay on the
+foreground) are passed explicitly, so later tuning of the defaults does not silently change
+what is tested. Distances use the paper's true-positive threshold (0.15 m). Where the tracker
+does not (yet) behave as the paper says, the test is a strict xfail whose reason gives the
+measured outcome and the core commit it was measured on.
+
+Situations (paper Section 5 and Fig. 7): a hand touching the torso keeps its track; clapping
+hands keep two tracks; a wrong end-effector is replaced by the right one; an unmatched
+end-effector is kept T frames; ids over two people; track fields; and on the synthetic
+'clapping' sequence the temporal estimate beats the single-frame one.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+import scenarios as sc
+
+from endeff_ros.core.params import EndeffParams
+from endeff_ros.core.single_frame import FrameEstimate, estimate_frame
+from endeff_ros.core.tracker import Tracker, TrackerResult
+from endeff_ros.core.types import RGBDFrame, Track
+from endeff_ros.scoring import MATCH_THRESHOLD_M, SequenceScorer, score_frame
+
+TOL = MATCH_THRESHOLD_M  # 0.15 m
+HEAD, L_HAND, R_HAND, L_FOOT, R_FOOT = range(5)  # tip order of scenarios.person
+
+
+@dataclass
+class Run:
+    """Tracker results (and optionally single-frame estimates) over a list of shots."""
+
+    shots: list[sc.Shot]
+    results: list[TrackerResult]
+    single: list[FrameEstimate]
+
+    def tip(self, i: int, k: int) -> np.ndarray:
+        return self.shots[i].tips[k]
+
+    def track(self, i: int, tid: int) -> Track | None:
+        return next((t for t in self.results[i].tracks if t.id == tid), None)
+
+    def ids(self, i: int) -> list[int]:
+        return [t.id for t in self.results[i].tracks]
+
+    def nearest(self, i: int, point: np.ndarray) -> tuple[Track | None, float]:
+        tracks = self.results[i].tracks
+        if not tracks:
+            return None, np.inf
+        d = [float(np.linalg.norm(t.position - point)) for t in tracks]
+        return tracks[int(np.argmin(d))], min(d)
+
+    def dist(self, i: int, tid: int, point: np.ndarray) -> float:
+        t = self.track(i, tid)
+        return np.inf if t is None else float(np.linalg.norm(t.position - point))
+
+    def sf_dist(self, i: int, point: np.ndarray) -> float:
+        p = self.single[i].positions()
+        return float(np.linalg.norm(p - point, axis=1).min()) if len(p) else np.inf
+
+    def labels(self, label: str) -> list[int]:
+        return [i for i, s in enumerate(self.shots) if s.label == label]
+
+    def table(self, tid: int, k: int) -> str:
+        """Per frame: label, single-frame distance to tip k, track tid's state/distance."""
+        rows = []
+        for i, s in enumerate(self.shots):
+            t = self.track(i, tid)
+            tr = 'gone' if t is None else f'st{t.state} {self.dist(i, tid, s.tips[k]):.2f}'
+            sf = f'{self.sf_dist(i, s.tips[k]):.2f}' if self.single else '-'
+            rows.append(f'{i}:{s.label} sf={sf} track{tid}={tr} ids={self.ids(i)}')
+        return '\n'.join(rows)
+
+
+def run(shots: list[sc.Shot], params: EndeffParams, *, single: bool = True) -> Run:
+    tracker = Tracker(params)
+    results = [tracker.update(s.frame) for s in shots]
+    estimates = [estimate_frame(s.frame, params) for s in shots] if single else []
+    return Run(shots, results, estimates)
+
+
+# Rendering dominates the run time: each animation is rendered once per session.
+touch_torso = functools.cache(sc.touch_torso)
+clap = functools.cache(sc.clap)
+unfold = functools.cache(sc.unfold)
+hand_to_side = functools.cache(sc.hand_to_side)
+star_limb_vanishes = functools.cache(sc.star_limb_vanishes)
+two_people = functools.cache(sc.two_people)
+still = functools.cache(sc.still)
+
+
+def _runs(lost: list[int]) -> list[list[int]]:
+    """Consecutive runs of frame indices."""
+    out: list[list[int]] = []
+    for i in lost:
+        if out and out[-1][-1] == i - 1:
+            out[-1].append(i)
+        else:
+            out.append([i])
+    return out
+
+
+# -- 1. A hand touching the torso keeps its track (Section 5, "a hand touched the body") ------
+
+TOUCH_T = 8
+
+
+@functools.cache
+def touch_run() -> Run:
+    return run(touch_torso(n_move=6), EndeffParams(keep_frames=TOUCH_T))
+
+
+def _touch_lost_span(r: Run) -> list[int]:
+    """Frames around the contact in which the single-frame estimate has no candidate on the
+    hand (the consecutive run holding the first contact frame)."""
+    lost = [i for i in range(len(r.shots)) if r.sf_dist(i, r.tip(i, R_HAND)) > TOL]
+    return next(span for span in _runs(lost) if r.labels('contact')[0] in span)
+
+
+def test_touch_torso_single_frame_loses_the_hand():
+    """The scenario: the arm attaches to the torso, the hand is no extreme, and the
+    single-frame estimator alone loses it in every contact frame, for fewer than T frames."""
+    r = touch_run()
+    span = _touch_lost_span(r)
+    assert set(r.labels('contact')) <= set(span)
+    assert len(span) < TOUCH_T, span
+    assert span[-1] < len(r.shots) - 2  # it shows the hand again afterwards
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    'measured (core 8a5ce49): one frame before contact (frame 6) the single-frame estimate '
+    'has lost the hand and shows a spurious candidate on the far (left) hip; the hand track '
+    '(its Eq. 7 memory down to 0.32 m while the hand neared the hip) is paired with it as an '
+    'unrelated pair (case B), the candidate (0.48 m) wins and the track jumps 0.37 m across '
+    'the body. In contact it is 0.33-0.35 m from the hand; the hand comes back as a new id '
+    '(5). With core f8c6a01 this test passed (hand track 0.06-0.07 m in contact, same id)'))
+def test_hand_touching_torso_keeps_its_track_and_id():
+    r = touch_run()
+    span = _touch_lost_span(r)
+    hand = [r.tip(i, R_HAND) for i in range(len(r.shots))]
+    # The track nearest the hand just before the single-frame estimate lost it ...
+    before = span[0] - 1
+    track, d = r.nearest(before, hand[before])
+    assert d < TOL
+    tid = track.id
+    # ... still holds the hand, with the same id, through the contact and after it.
+    for i in r.labels('contact'):
+        assert r.dist(i, tid, hand[i]) < TOL, r.table(tid, R_HAND)
+        assert r.track(i, tid).state == Track.PREDICTED  # it lives on its prediction
+    for i in range(span[-1] + 1, len(r.shots)):
+        assert r.dist(i, tid, hand[i]) < TOL, r.table(tid, R_HAND)
+
+
+# -- 2. Clapping hands merge, the right pair survives (Fig. 7b) ----------------------------------
+
+
+@functools.cache
+def clap_run() -> Run:
+    return run(clap(), EndeffParams(keep_frames=5))
+
+
+def _spurious(r: Run, i: int) -> np.ndarray:
+    """Single-frame candidates farther than TOL from every true tip (e.g. on an elbow)."""
+    p = r.single[i].positions()
+    d = np.linalg.norm(p[:, None] - r.shots[i].tips[None], axis=2).min(axis=1)
+    return p[d > TOL]
+
+
+def test_clap_contact_single_frame_loses_a_hand_or_adds_a_spurious_one():
+    r = clap_run()
+    for i in r.labels('contact'):
+        hands = r.shots[i].tips[[L_HAND, R_HAND]]
+        tp = score_frame(r.single[i].positions(), hands).tp
+        assert tp < 2 or len(_spurious(r, i)) > 0, i
+
+
+def test_clap_contact_tracker_keeps_both_hands():
+    r = clap_run()
+    for i in r.labels('contact'):
+        hands = r.shots[i].tips[[L_HAND, R_HAND]]
+        score = score_frame(r.results[i].positions(), hands)
+        assert score.tp == 2, (i, [(t.id, t.state, np.round(t.position, 2).tolist())
+                                   for t in r.results[i].tracks])
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    'measured (core 8a5ce49): in all 3 contact frames a track sits on the spurious elbow '
+    'candidate (0.3 m from the midline, 0.37-0.46 m from the hands). The elbow tracks start '
+    'while the hands close (frames 3-4): the single-frame estimate finds the elbows, not the '
+    'hands, and the hand predictions rectify to graph nodes unreachable from the root (Eq. 7 '
+    'nan, geodesic inf to every candidate), so they are case C and never compete with the '
+    'elbow candidates, which then match their own tracks (case A)'))
+def test_clap_contact_spurious_candidate_not_tracked():
+    """Fig. 7b: the merged hands give a spurious candidate (on an elbow); the memorised hand
+    wins the comparison and the spurious candidate is dropped, so no track sits there."""
+    r = clap_run()
+    found = 0
+    for i in r.labels('contact'):
+        spur = _spurious(r, i)
+        found += len(spur)
+        pos = r.results[i].positions()
+        for q in spur:
+            d = np.linalg.norm(pos - q, axis=1).min()
+            assert d > TOL, (i, np.round(q, 2).tolist(), f'track {d:.2f} m from it')
+    assert found, 'scenario produced no spurious candidate in contact'
+
+
+# -- 3. A wrong end-effector is dropped once the right one shows (Fig. 7c) -----------------------
+
+
+def test_folded_arm_wrong_end_effector_replaced_by_hand():
+    keep = 3
+    r = run(unfold(), EndeffParams(keep_frames=keep))
+    n = len(r.shots)
+    hand = [r.tip(i, R_HAND) for i in range(n)]
+    # Frame 0: the arm is folded, the single-frame extreme of that arm is the elbow, not the hand.
+    assert r.sf_dist(0, hand[0]) > TOL
+    wrong, d0 = r.nearest(0, hand[0])
+    assert d0 > TOL
+    wrong_pos = wrong.position
+    # Within two frames of the arm starting to extend a track holds the hand, from then on.
+    for i in range(2, n):
+        _, d = r.nearest(i, hand[i])
+        assert d < TOL, (i, r.table(wrong.id, R_HAND))
+    # After T + 1 frames no track remains on the wrong place.
+    for i in range(keep + 1, n):
+        d = np.linalg.norm(r.results[i].positions() - wrong_pos, axis=1).min()
+        assert d > TOL, (i, r.table(wrong.id, R_HAND))
+
+
+def test_folded_arm_wrong_track_moves_to_the_hand():
+    """Case B, candidate wins (Fig. 7c): the wrong track follows the hand (same id)."""
+    r = run(unfold(), EndeffParams(keep_frames=3))
+    wrong, _ = r.nearest(0, r.tip(0, R_HAND))
+    for i in range(2, len(r.shots)):
+        assert r.dist(i, wrong.id, r.tip(i, R_HAND)) < TOL, r.table(wrong.id, R_HAND)
+
+
+# -- 4. An unmatched end-effector is kept T frames, then removed (case C) ------------------------
+
+
+#: Far enough for a vanished star limb's prediction to snap onto the ball (0.31 m from its old
+#: tip), so it stays on the foreground and is a plain case-C prediction.
+REACH = 0.4
+
+
+@pytest.mark.parametrize('keep', [2, 4])
+def test_unmatched_limb_kept_exactly_t_frames(keep):
+    """Case C: a star limb disappears, its prediction still lands on the foreground (the
+    ball); the track is kept as predicted for exactly T frames, then removed."""
+    shots = star_limb_vanishes(3, 7)
+    r = run(shots, EndeffParams(keep_frames=keep, max_rectify_distance=REACH), single=False)
+    gone = r.labels('gone')[0]
+    track, d = r.nearest(gone - 1, sc.star_tip(5, 0))
+    assert d < TOL and track.state == Track.DETECTED
+    tid = track.id
+    for i in range(gone, gone + keep):
+        t = r.track(i, tid)
+        assert t is not None and t.state == Track.PREDICTED, (i, r.table(tid, 0))
+    for i in range(gone + keep, len(shots)):
+        assert r.track(i, tid) is None, (i, r.table(tid, 0))
+    # The other four limbs keep their tracks throughout.
+    assert all(len(r.results[i].tracks) == 4 for i in range(gone + keep, len(shots)))
+
+
+HAND_T4 = pytest.mark.xfail(strict=True, reason=(
+    'measured (core 8a5ce49): the pressed hand is never detected but its track stays '
+    'predicted for 8 frames with T = 4: in frame 6 a single-frame candidate 0.15 m from the '
+    'hand is matched to it as an unrelated pair (case B), the memorised hand wins and its '
+    'count of unmatched frames restarts from 0'))
+
+
+@pytest.mark.parametrize('keep', [2, pytest.param(4, marks=HAND_T4)])
+def test_unmatched_hand_predicted_at_most_t_frames(keep):
+    """A hand pressed against the torso and kept there: the single-frame estimate never shows
+    it again, so its track is published as predicted for at most T frames."""
+    shots = hand_to_side(3, 8)
+    r = run(shots, EndeffParams(keep_frames=keep))
+    pressed = r.labels('pressed')
+    first = pressed[0]
+    assert all(r.sf_dist(i, r.tip(i, R_HAND)) > TOL for i in pressed[:keep])
+    track, d = r.nearest(first - 1, r.tip(first - 1, R_HAND))
+    assert d < TOL
+    tid = track.id
+    for i in range(first, first + keep):  # kept (as a prediction, on the hand) T frames ...
+        t = r.track(i, tid)
+        assert t is not None and t.state == Track.PREDICTED, r.table(tid, R_HAND)
+        assert r.dist(i, tid, r.tip(i, R_HAND)) < TOL
+    for i in range(first + keep, len(shots)):  # ... and not longer
+        assert r.track(i, tid) is None, r.table(tid, R_HAND)
+
+
+@pytest.mark.parametrize('keep', [2, 4])
+def test_vanished_limb_removed_within_t_frames(keep):
+    """A star limb removed from the scene: its prediction has no foreground left near it, so
+    it is dropped (at the latest after T predicted frames)."""
+    shots = star_limb_vanishes(3, 7)
+    r = run(shots, EndeffParams(keep_frames=keep), single=False)
+    gone = r.labels('gone')[0]
+    tip = sc.star_tip(5, 0)
+    track, d = r.nearest(gone - 1, tip)
+    assert d < TOL
+    tid = track.id
+    predicted = [i for i in range(gone, len(shots)) if r.track(i, tid) is not None]
+    assert all(r.track(i, tid).state == Track.PREDICTED for i in predicted)
+    assert len(predicted) <= keep
+    for i in range(gone + keep, len(shots)):
+        assert r.track(i, tid) is None
+        assert np.linalg.norm(r.results[i].positions() - tip, axis=1).min() > TOL
+
+
+# -- 5. Two people: unique ids, entity per person ------------------------------------------------
+
+
+def test_two_people_unique_ids_and_entities():
+    r = run(two_people(4), EndeffParams(keep_frames=5), single=False)
+    for i, res in enumerate(r.results):
+        ids = r.ids(i)
+        assert len(ids) == len(set(ids)), ids
+        tips = r.shots[i].tips
+        entity_of = []
+        for person in (range(0, 5), range(5, 10)):
+            ents = set()
+            for k in person:
+                t, d = r.nearest(i, tips[k])
+                if d < TOL:
+                    ents.add(t.entity)
+            assert len(ents) == 1, (i, ents)
+            entity_of.append(ents.pop())
+        assert entity_of[0] != entity_of[1]
+        if i >= 1:  # every tip of both people is held by a track (one-to-one)
+            assert score_frame(res.positions(), tips).tp == 10, i
+    all_ids = [tid for i in range(len(r.results)) for tid in r.ids(i)]
+    assert len(set(all_ids)) >= 10
+
+
+# -- 6. Track fields, reset, parameters at run time ----------------------------------------------
+
+
+def test_still_person_keeps_every_id():
+    """A person standing still: one track per end-effector, same ids in every frame."""
+    r = run(still(), EndeffParams(keep_frames=5), single=False)
+    first = {k: r.nearest(0, r.tip(0, k))[0].id for k in range(5)}
+    for i in range(1, len(r.shots)):
+        for k in (L_HAND, R_HAND, L_FOOT, R_FOOT):
+            t, d = r.nearest(i, r.tip(i, k))
+            assert d < TOL and t.id == first[k], (i, k, first, r.ids(i))
+
+
+def test_track_state_age_confidence():
+    keep = 4
+    r = run(star_limb_vanishes(3, 7), EndeffParams(keep_frames=keep, max_rectify_distance=REACH),
+            single=False)
+    people = run(hand_to_side(3, 8), EndeffParams(keep_frames=keep), single=False)
+    for rr in (r, people):
+        for i, res in enumerate(rr.results):
+            for t in res.tracks:
+                assert t.state in (Track.DETECTED, Track.PREDICTED)
+                assert 0.0 <= t.confidence <= 1.0
+                prev = rr.track(i - 1, t.id) if i else None
+                assert t.age == (1 if prev is None else prev.age + 1), (i, t.id)  # +1 a frame
+        detected = [t.confidence for res in rr.results for t in res.tracks if t.state == 0]
+        predicted = [t.confidence for res in rr.results for t in res.tracks if t.state == 1]
+        assert predicted and np.mean(predicted) < np.mean(detected)
+    # The vanished limb: detected, then predicted with a confidence below the detected one that
+    # falls with every further unmatched frame.
+    gone = r.labels('gone')[0]
+    tid = r.nearest(gone - 1, sc.star_tip(5, 0))[0].id
+    assert r.track(gone - 1, tid).state == Track.DETECTED
+    confs = [r.track(i, tid).confidence for i in range(gone - 1, gone + keep)]
+    assert all(b < a for a, b in zip(confs, confs[1:])), confs
+
+
+def test_reset_clears_tracks():
+    shots = star_limb_vanishes(3, 7)
+    tracker = Tracker(EndeffParams(keep_frames=4))
+    for s in shots[:3]:
+        tracker.update(s.frame)
+    tracker.reset()
+    again = tracker.update(shots[3].frame)
+    fresh = Tracker(EndeffParams(keep_frames=4)).update(shots[3].frame)
+    assert [t.id for t in again.tracks] == [t.id for t in fresh.tracks] == [0, 1, 2, 3]
+    assert all(t.age == 1 and t.state == Track.DETECTED for t in again.tracks)
+    np.testing.assert_allclose(again.positions(), fresh.positions())
+
+
+def test_params_change_between_frames_takes_effect():
+    shots = star_limb_vanishes(3, 7)  # limb 0 gone from frame 3 on
+    tip = sc.star_tip(5, 0)
+    tracker = Tracker(EndeffParams(keep_frames=4, max_rectify_distance=REACH))
+    results = [tracker.update(s.frame) for s in shots[:5]]  # limb predicted in frames 3, 4
+    tid = min(results[2].tracks, key=lambda t: np.linalg.norm(t.position - tip)).id
+    assert any(t.id == tid and t.state == Track.PREDICTED for t in results[4].tracks)
+    tracker.params = tracker.params.replace(keep_frames=1)
+    assert all(t.id != tid for t in tracker.update(shots[5].frame).tracks)
+    # The other way: a longer T keeps a prediction that the old T would have dropped ...
+    tracker = Tracker(EndeffParams(keep_frames=1, max_rectify_distance=REACH))
+    results = [tracker.update(s.frame) for s in shots[:4]]  # limb predicted in frame 3
+    tracker.params = tracker.params.replace(keep_frames=3)
+    nxt = tracker.update(shots[4].frame)
+    assert any(t.id == tid and t.state == Track.PREDICTED for t in nxt.tracks)
+    # ... and with a short rectification reach the limb's first prediction has left the
+    # foreground: dropped at once.
+    tracker = Tracker(EndeffParams(keep_frames=4, max_rectify_distance=REACH))
+    for s in shots[:3]:
+        tracker.update(s.frame)
+    tracker.params = tracker.params.replace(max_rectify_distance=0.15)
+    assert all(t.id != tid for t in tracker.update(shots[3].frame).tracks)
+
+
+# -- 7. The synthetic 'clapping' sequence: temporal recall above single-frame recall ------------
+
+
+@pytest.mark.slow
+def test_clapping_sequence_temporal_recall_beats_single_frame():
+    from endeff_ros.synth import render_sequence
+
+    params = EndeffParams(keep_frames=5)
+    tracker = Tracker(params)
+    scorers = {'temporal': SequenceScorer(), 'single_frame': SequenceScorer()}
+    frames = 0
+    for f in render_sequence('clapping', quick=False):
+        if f.depth is None:  # a dropped depth frame is no RGB-D frame
+            continue
+        frames += 1
+        frame = RGBDFrame(f.stamp_ns, f.frame_id, f.depth, f.intrinsics, f.color)
+        res = tracker.update(frame)
+        scorers['temporal'].add(res.positions(), f.gt)
+        scorers['single_frame'].add(estimate_frame(frame, params).positions(), f.gt)
+    assert frames >= 70
+    temporal = scorers['temporal'].result()
+    single = scorers['single_frame'].result()
+    assert temporal.recall > single.recall, (temporal, single)
