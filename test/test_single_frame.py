@@ -378,7 +378,7 @@ def test_camera_rotation_about_its_centre_rotates_the_tips(kind, arg, seed):
 def test_rigid_motion_moves_the_tips(kind, arg, seed):
     """Rotation + translation. The part-radius step pushes a tip along the viewing ray from the
     camera origin, which a translation of the cloud does not carry along (measured up to
-    3.4 cm on the robot arm), so the geometric part is tested with max_part_radius = 0."""
+    2-3.4 cm on the robot arm), so the geometric part is tested with max_part_radius = 0."""
     params = CLOUD_PARAMS.replace(max_part_radius=0.0)
     points = foreground(kind, arg, seed)
     base = estimate_points(points, params).positions()
