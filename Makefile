@@ -11,7 +11,7 @@ export RMW_IMPLEMENTATION ?= rmw_fastrtps_cpp
 export FASTRTPS_DEFAULT_PROFILES_FILE ?= $(CURDIR)/config/fastdds_shm.xml
 export FASTDDS_DEFAULT_PROFILES_FILE ?= $(CURDIR)/config/fastdds_shm.xml
 
-.PHONY: venv run test bench data lint clean
+.PHONY: venv run test bench data lint clean eval
 
 venv: $(STAMP)
 
@@ -22,7 +22,7 @@ $(STAMP): requirements.txt setup.py
 	touch $(STAMP)
 
 $(DATA)/.done: $(STAMP)
-	$(BIN)/endeff synth --out $(DATA)
+	$(BIN)/endeff synth --out $(DATA) --storage mcap
 	touch $@
 
 data: $(DATA)/.done
@@ -41,3 +41,7 @@ lint: $(STAMP)
 
 clean:
 	rm -rf build install log $(VENV) data
+
+# The committed evaluation report (docs/eval): both estimators on the full synthetic set.
+eval: $(DATA)/.done
+	$(BIN)/endeff eval $(DATA)/mcap --json docs/eval/report.json --plots docs/eval --jobs 2

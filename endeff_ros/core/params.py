@@ -167,12 +167,17 @@ def describe() -> list[dict[str, Any]]:
 NODE_NAME = 'endeff_node'
 
 
-def to_ros_yaml(params: EndeffParams | None = None, node_name: str = NODE_NAME) -> str:
-    """Render the parameter set as a ROS 2 parameter file (``config/endeff.yaml``)."""
+def to_ros_yaml(params: EndeffParams | None = None, node_name: str = '/**') -> str:
+    """Render the parameter set as a ROS 2 parameter file (``config/endeff.yaml``).
+
+    The default key ``/**`` matches the node in any namespace (``endeff_node:`` would only
+    match a node in the root namespace, not ``/camera/endeff_node``).
+    """
     params = params or EndeffParams()
     lines = ['# Generated from endeff_ros.core.params.EndeffParams by `endeff params --yaml`.',
              '# Do not edit by hand: a test checks this file against the dataclass.',
-             f'{node_name}:', '  ros__parameters:']
+             f"'{node_name}':" if node_name.startswith('/') else f'{node_name}:',
+             '  ros__parameters:']
     for row in describe():
         symbol = f' [{row["symbol"]}]' if row['symbol'] else ''
         unit = f' ({row["unit"]})' if row['unit'] else ''

@@ -1,4 +1,4 @@
-"""The single-frame estimator of Section 4 (the R-NBLS-style baseline): frame in, candidates out."""
+"""The single-frame estimator of Section 4 (the R-NBLS-style baseline): frame in, candidates."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
+
 from .bands import UNREACHED, Neighbours, density_mask, expand_bands, split_subbands
 from .cloud import FloorPlane, foreground_cloud
-from .graph import (TopologyGraph, approximate_geodesic, build_graph, find_end_effectors,
-                    geodesic)
+from .graph import TopologyGraph, approximate_geodesic, build_graph, find_end_effectors, geodesic
 from .params import EndeffParams
 from .types import Candidate, RGBDFrame
 
