@@ -104,7 +104,7 @@ class EndeffParams:
                           'this many frames.', symbol='T', lo=0, hi=1000)
     memory_sigma: float = _p(0.8, 'Geodesic memory penalty, α = σ^k (Eqs. 8-9).', symbol='σ',
                              lo=0.0, hi=1.0)
-    duplicate_distance: float = _p(0.12, 'A predicted end-effector closer than this to a '
+    duplicate_distance: float = _p(0.05, 'A predicted end-effector closer than this to a '
                                    'detected (or longer-memory) one is dropped as a duplicate.',
                                    unit='m', lo=0.0, hi=1.0)
     max_rectify_distance: float = _p(0.15, 'A prediction farther than this from every '

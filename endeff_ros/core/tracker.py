@@ -7,8 +7,10 @@ Per frame t+1:
    between the colour images back-projected with depth and K: :mod:`.flow`), giving E^pr_{t+1}.
    Without a colour pair (first frame, dropped colour) the prediction is zero motion.
 3. **Rectify**: each prediction snaps to the closest current foreground point, which gives it
-   a node of the current topology graph (and its entity). A prediction farther than
-   ``max_rectify_distance`` from every point has left the foreground and is dropped.
+   a node of the current topology graph (and its entity). Tracks are predicted and rectified
+   through their surface anchor (an end-effector lies a part radius behind the surface). A
+   prediction farther than ``max_rectify_distance`` from every point has left the foreground
+   and is dropped.
 4. **Correspondence**: similarity between a prediction and a candidate is inversely
    proportional to their geodesic distance in the current graph,
    ``s = 1 / (1 + d_G / similarity_scale)``; the Hungarian algorithm (scipy) maximises it.
@@ -79,6 +81,7 @@ class _TrackState:
     age: int = 1
     path: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
     detected: bool = True
+    offset: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
 
 
 @dataclass(frozen=True)
@@ -123,6 +126,7 @@ class Tracker:
         stages['predict'] = (time.perf_counter() - t0) * 1e3
         t0 = time.perf_counter()
         self._tracks = self._update(estimate, predicted)
+        self._anchor(estimate)
         stages['update'] = (time.perf_counter() - t0) * 1e3
         self._prev = frame
         tracks = [self._publish(t) for t in self._tracks]
@@ -130,9 +134,29 @@ class Tracker:
 
     # -- predict (Section 5.1) ---------------------------------------------------------------
 
+    def _anchor(self, estimate: FrameEstimate) -> None:
+        """Remember where each track sits relative to the visible surface.
+
+        An end-effector is the centre of its part, about one radius behind the surface, but
+        scene flow moves surface points and rectification snaps to surface points. So the
+        surface point closest to the track (its anchor) is what gets predicted and rectified,
+        and the offset is added back: prediction and detection then compare like with like.
+        """
+        if not self._tracks:
+            return
+        positions = np.array([t.position for t in self._tracks])
+        if len(estimate.points) == 0:
+            offsets = np.zeros_like(positions)
+        else:
+            _, nearest = cKDTree(estimate.points).query(positions)
+            offsets = positions - estimate.points[nearest]
+        for track, offset in zip(self._tracks, offsets):
+            track.offset = offset
+
     def _predict(self, frame: RGBDFrame) -> npt.NDArray[np.float64]:
-        """E^pr_{t+1}: previous positions moved by the scene flow (zero motion without it)."""
-        positions = np.array([t.position for t in self._tracks]).reshape(-1, 3)
+        """Anchors of E^pr_{t+1}: previous surface anchors moved by the scene flow (zero motion
+        without a colour pair)."""
+        positions = np.array([t.position - t.offset for t in self._tracks]).reshape(-1, 3)
         prev = self._prev
         if (len(positions) == 0 or prev is None or prev.color is None or frame.color is None
                 or prev.depth.shape != frame.depth.shape):
@@ -145,7 +169,8 @@ class Tracker:
 
     def _rectify(self, estimate: FrameEstimate,
                  predicted: npt.NDArray[np.float64]) -> list[_Prediction]:
-        """Snap predictions to the closest current point; attach graph node and Eq. 7."""
+        """Snap predicted anchors to the closest current point (graph node, entity, Eq. 7),
+        then put each track's offset from its anchor back."""
         out: list[_Prediction] = []
         if len(predicted) == 0:
             return out
@@ -153,18 +178,20 @@ class Tracker:
         pts = estimate.points
         usable = np.flatnonzero(estimate.subband != UNREACHED)
         if usable.size == 0:
-            return [_Prediction(t, predicted[i], -1, t.entity, np.nan)
+            return [_Prediction(t, predicted[i] + t.offset, -1, t.entity, np.nan)
                     for i, t in enumerate(self._tracks)]
         dist, nearest = cKDTree(pts[usable]).query(predicted)
         for i, track in enumerate(self._tracks):
             if dist[i] > p.max_rectify_distance:
-                out.append(_Prediction(track, predicted[i], -1, track.entity, np.nan))
+                out.append(_Prediction(track, predicted[i] + track.offset, -1, track.entity,
+                                       np.nan))
                 continue
             idx = usable[nearest[i]]
             node = int(estimate.subband[idx])
             entity = int(estimate.entity[idx])
-            geo = self._geodesic_at(estimate, entity, node, pts[idx])
-            out.append(_Prediction(track, pts[idx], node, entity, geo))
+            position = pts[idx] + track.offset
+            geo = self._geodesic_at(estimate, entity, node, position)
+            out.append(_Prediction(track, position, node, entity, geo))
         return out
 
     @staticmethod
