@@ -53,9 +53,10 @@ class Neighbours:
         # Pairs are sorted by i, so the kept pairs form a one-directional CSR directly; weak
         # components of it are the undirected components (and 10x cheaper to compute than
         # on the symmetric matrix).
-        indptr = np.zeros(self.n + 1, dtype=np.intp)
+        # float64 data and int32 indices are what csgraph uses: no conversion copies.
+        indptr = np.zeros(self.n + 1, dtype=np.int32)
         np.cumsum(np.bincount(self.i[keep], minlength=self.n), out=indptr[1:])
-        g = sparse.csr_matrix((np.ones(int(indptr[-1]), dtype=np.int8), self.j[keep], indptr),
+        g = sparse.csr_matrix((np.ones(int(indptr[-1])), self.j[keep].astype(np.int32), indptr),
                               shape=(self.n, self.n))
         return csgraph.connected_components(g, directed=True, connection='weak')[1]
 

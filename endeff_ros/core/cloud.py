@@ -130,7 +130,10 @@ def fit_floor(points: npt.NDArray[np.float64], *, distance: float, max_tilt_deg:
     inliers = np.abs(points @ normal + offset) < distance
     if np.count_nonzero(inliers) < max(3, min_fraction * n):
         return None
-    normal, offset = _refine_plane(points[inliers], normal)
+    support = points[inliers]
+    if len(support) > sample:  # least squares on a subsample: as good, 10x cheaper
+        support = support[rng.choice(len(support), size=sample, replace=False)]
+    normal, offset = _refine_plane(support, normal)
     if -normal[1] < cos_tilt:
         return None
     return FloorPlane(normal, offset)

@@ -30,7 +30,8 @@ class TopologyGraph:
     """Sub-band graph of the whole frame (entities are disconnected components).
 
     ``centroids`` (K, 3) node positions; ``sizes`` (K,) points per node; ``band`` (K,) band
-    of each node; ``weights`` (K, K) sparse symmetric Eq. 5 weights. ``dist`` (K, K) and
+    of each node; ``dense_weights`` (K, K) symmetric Eq. 5 weights, 0 where there is no edge
+    (``weights`` gives them as a sparse matrix). ``dist`` (K, K) and
     ``pred`` (K, K) are all-pairs geodesic distances (Eq. 6) and predecessors: the graph has
     a few hundred nodes at most, so one all-pairs Dijkstra per frame is cheaper than the many
     single-source runs the iterated search and the tracker would otherwise make.
@@ -39,13 +40,18 @@ class TopologyGraph:
     centroids: npt.NDArray[np.float64]
     sizes: npt.NDArray[np.intp]
     band: npt.NDArray[np.intp]
-    weights: sparse.csr_matrix
+    dense_weights: npt.NDArray[np.float64]
     dist: npt.NDArray[np.float64]
     pred: npt.NDArray[np.intp]
 
     @property
     def n_nodes(self) -> int:
         return len(self.centroids)
+
+    @property
+    def weights(self) -> sparse.csr_matrix:
+        """Eq. 5 edge weights as a sparse symmetric (K, K) matrix."""
+        return sparse.csr_matrix(self.dense_weights)
 
     def shortest_paths(self, sources: npt.ArrayLike) -> tuple[npt.NDArray[np.float64],
                                                               npt.NDArray[np.intp]]:
@@ -109,14 +115,13 @@ def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
     w = np.maximum(np.sqrt(np.einsum('ij,ij->i', seg, seg)), 1e-9)  # Eq. 5
     dense = np.zeros((k, k))
     dense[rows, cols] = dense[cols, rows] = w
-    weights = sparse.csr_matrix(dense)
     if k:
         # Dense input: zeros are non-edges; cheaper than building the sparse form twice.
         dist, pred = csgraph.shortest_path(dense, method='D', directed=False,
                                            return_predecessors=True)
     else:
         dist, pred = np.zeros((0, 0)), np.zeros((0, 0), dtype=np.intp)
-    return TopologyGraph(centroids, sizes, node_band, weights, dist, pred)
+    return TopologyGraph(centroids, sizes, node_band, dense, dist, pred)
 
 
 def path_to_sources(pred: npt.NDArray[np.intp], node: int) -> npt.NDArray[np.intp]:

@@ -255,7 +255,9 @@ def _tip_position(points: npt.NDArray[np.float64], members: _Members,
         return centre
     ray = centre / np.linalg.norm(centre)
     inward = graph.centroids[path[min(len(path) - 1, len(near))]] - centre
-    across = np.cross(inward, ray)
+    across = np.array([inward[1] * ray[2] - inward[2] * ray[1],  # inward x ray (np.cross
+                       inward[2] * ray[0] - inward[0] * ray[2],  # costs ~70 µs a call)
+                       inward[0] * ray[1] - inward[1] * ray[0]])
     norm = np.linalg.norm(across)
     if norm < 1e-9:
         return centre
