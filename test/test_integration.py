@@ -93,3 +93,30 @@ def test_recall_equals_offline_evaluation(bag, record):
     assert scorer.scored_frames > 0
     assert abs(online.recall - offline.recall) <= 0.02, (online, offline)
     assert abs(online.mean_error_m - offline.mean_error_m) <= 0.01, (online, offline)
+
+
+def test_process_output_equals_node_output(bag, record, tmp_path):
+    """``endeff process`` on the same bag gives the node's end-effectors, frame by frame."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    from endeff_ros.bag.process import process_bag
+    from endeff_ros.ros import convert
+
+    out = tmp_path / 'processed'
+    process_bag(bag, out)
+    offline = {}
+    with AnyReader([out], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        conns = [c for c in reader.connections if c.msgtype == 'sensor_msgs/msg/PointCloud2']
+        for conn, _, raw in reader.messages(connections=conns):
+            msg = reader.deserialize(raw, conn.msgtype)
+            offline[convert.stamp_to_ns(msg.header.stamp)] = convert.cloud_to_array(msg)
+    online = {int(s): c for s, c in record['outputs']['node'].items()}
+    assert sorted(offline) == sorted(online)
+    for stamp, arr in offline.items():
+        node = online[stamp]
+        assert sorted(node['id']) == sorted(arr['id'].tolist()), stamp
+        order_n, order_o = np.argsort(node['id']), np.argsort(arr['id'])
+        for f in ('x', 'y', 'z'):
+            np.testing.assert_allclose(np.asarray(node[f])[order_n], arr[f][order_o], atol=1e-5)
+        assert np.asarray(node['state'])[order_n].tolist() == arr['state'][order_o].tolist()
