@@ -19,6 +19,7 @@ from functools import partial
 from types import SimpleNamespace
 from typing import Any
 
+import cv2
 import numpy as np
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
@@ -319,6 +320,9 @@ class EndeffNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run endeff_ros endeff_node``."""
+    # One OpenCV thread: the node already runs DDS, executor and worker threads, and on a
+    # robot's shared CPU a second flow thread only adds contention (measured: latency_bench).
+    cv2.setNumThreads(1)
     rclpy.init(args=args)
     node = None
     try:
