@@ -59,7 +59,8 @@ def _stats(samples: list[float]) -> dict[str, float]:
             'mean': round(float(a.mean()), 3), 'n': int(a.size)}
 
 
-def bench_single_frame(repeats: int = 200, warmup: int = 10) -> dict[str, Any]:
+def bench_single_frame(repeats: int = 200, warmup: int = 10,
+                       params: Any = None) -> dict[str, Any]:
     """Time :func:`estimate_frame` on one standing-person frame."""
     from .core.params import EndeffParams
     from .core.single_frame import estimate_frame
@@ -68,7 +69,7 @@ def bench_single_frame(repeats: int = 200, warmup: int = 10) -> dict[str, Any]:
 
     f = render_person_frame()
     frame = RGBDFrame(f.stamp_ns, f.frame_id, f.depth, f.intrinsics, f.color)
-    params = EndeffParams()
+    params = params or EndeffParams()
     box = np.isfinite(f.depth) & (f.depth >= params.box_min_z) & (f.depth <= params.box_max_z)
     for _ in range(warmup):
         estimate_frame(frame, params)
@@ -97,7 +98,8 @@ def _foreground_pixels(frame: Any, params: Any) -> int:
     return len(foreground_cloud(frame.depth, frame.intrinsics, full)[0])
 
 
-def bench_full_pipeline(sequence: str = 'waving_two_hands', repeats: int = 2) -> dict[str, Any]:
+def bench_full_pipeline(sequence: str = 'waving_two_hands', repeats: int = 2,
+                        params: Any = None) -> dict[str, Any]:
     """Time :meth:`Tracker.update` per frame over a synthetic sequence, flow included."""
     from .core.params import EndeffParams
     from .core.tracker import Tracker
@@ -108,7 +110,7 @@ def bench_full_pipeline(sequence: str = 'waving_two_hands', repeats: int = 2) ->
               for f in render_sequence(sequence) if f.depth is not None]
     times, stages = [], {}
     for r in range(repeats):
-        tracker = Tracker(EndeffParams())
+        tracker = Tracker(params or EndeffParams())
         for frame in frames:
             t0 = time.perf_counter()
             res = tracker.update(frame)
@@ -130,14 +132,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--ros', action='store_true',
                         help='also measure end-to-end latency over DDS against a relay node')
     parser.add_argument('--no-pin', action='store_true', help='do not pin to one CPU core')
+    parser.add_argument('--params', metavar='YAML',
+                        help='parameter file (e.g. config/endeff_fast.yaml); default: defaults')
 
 
 def run(args: argparse.Namespace) -> int:
     cpu = None if args.no_pin else _pin_one_core()
     out: dict[str, Any] = {'machine': {'python': platform.python_version(),
                                        'cpu_count': os.cpu_count(), 'pinned_cpu': cpu}}
-    out.update(bench_single_frame(repeats=args.repeats))
-    out.update(bench_full_pipeline())
+    params = None
+    if args.params:
+        from .core.params import load_yaml
+
+        params = load_yaml(args.params)
+        out['params'] = args.params
+    out.update(bench_single_frame(repeats=args.repeats, params=params))
+    out.update(bench_full_pipeline(params=params))
     if args.flow:
         from .core.flow import flow_benchmark
 

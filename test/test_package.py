@@ -172,6 +172,17 @@ def test_config_file_loads_to_the_defaults() -> None:
     assert load_yaml(str(CONFIG)) == EndeffParams()
 
 
+def test_preset_files_are_generated_and_load() -> None:
+    from endeff_ros.core.params import PRESETS
+
+    for name, values in PRESETS.items():
+        path = REPO / 'config' / f'endeff_{name}.yaml'
+        params = EndeffParams(**values)
+        assert path.read_text(encoding='utf-8') == to_ros_yaml(params), (
+            f'{path.name} is stale: regenerate it with `endeff params --yaml --preset {name}`')
+        assert load_yaml(str(path)) == params != EndeffParams()
+
+
 def test_every_parameter_is_documented() -> None:
     rows = describe()
     assert [r['name'] for r in rows] == [f.name for f in dataclasses.fields(EndeffParams)]
