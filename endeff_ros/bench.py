@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import os
 import platform
 import sys
@@ -25,6 +24,8 @@ from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
+
+from .cli import load_params_option, print_json
 
 
 def _pin_one_core() -> int | None:
@@ -140,11 +141,8 @@ def run(args: argparse.Namespace) -> int:
     cpu = None if args.no_pin else _pin_one_core()
     out: dict[str, Any] = {'machine': {'python': platform.python_version(),
                                        'cpu_count': os.cpu_count(), 'pinned_cpu': cpu}}
-    params = None
-    if args.params:
-        from .core.params import load_yaml
-
-        params = load_yaml(args.params)
+    params = load_params_option(args.params, 'endeff bench')
+    if params is not None:
         out['params'] = args.params
     out.update(bench_single_frame(repeats=args.repeats, params=params))
     out.update(bench_full_pipeline(params=params))
@@ -161,11 +159,7 @@ def run(args: argparse.Namespace) -> int:
         from .ros.latency_bench import benchmark as ros_benchmark
 
         out['ros'] = ros_benchmark()
-    text = json.dumps(out, indent=2, default=float)
-    print(text)
-    if args.json:
-        with open(args.json, 'w', encoding='utf-8') as fh:
-            fh.write(text + '\n')
+    print_json(out, args.json)
     return 0
 
 

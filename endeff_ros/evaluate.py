@@ -38,7 +38,8 @@ from endeff_ros.bag.reader import (
     find_bags,
     options_from_args,
 )
-from endeff_ros.core.errors import EndeffError, InputError
+from endeff_ros.cli import load_params_option
+from endeff_ros.core.errors import InputError
 from endeff_ros.scoring import (
     MATCH_THRESHOLD_M,
     MethodScore,
@@ -391,15 +392,7 @@ def evaluate_bags(paths: Sequence[str | Path], *, params: EndeffParams | None = 
 
 def run(args: argparse.Namespace) -> int:
     """``endeff eval``: print the table, write JSON and plots; 1 if any bag failed."""
-    params = None
-    if args.params:
-        from endeff_ros.core.params import load_yaml
-
-        try:
-            params = load_yaml(args.params)
-        except (OSError, EndeffError) as err:
-            _stderr(f'endeff eval: cannot load parameters {args.params}: {err}')
-            return 2
+    params = load_params_option(args.params, 'endeff eval')
     jobs = args.jobs if args.jobs and args.jobs > 0 else (os.cpu_count() or 1)
     report, _ = evaluate_bags(args.bags, params=params, options=options_from_args(args),
                               jobs=jobs)

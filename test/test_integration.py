@@ -76,18 +76,13 @@ def test_markers_match_cloud(record):
 
 
 def test_recall_equals_offline_evaluation(bag, record):
+    from endeff_ros.demo import score_record
     from endeff_ros.evaluate import evaluate_bag
     from endeff_ros.ros.replay import BagSource
-    from endeff_ros.scoring import SequenceScorer
 
     with BagSource(bag) as source:
         gt = source.ground_truth()
-    scorer = SequenceScorer()
-    for stamp in record['depth_sent']:
-        cloud = record['outputs']['node'].get(stamp)
-        est = (np.stack([cloud['x'], cloud['y'], cloud['z']], axis=1) if cloud and cloud['x']
-               else np.zeros((0, 3)))
-        scorer.add(est, gt.get(stamp))
+    scorer = score_record(record, gt)
     online = scorer.result()
     offline = evaluate_bag(bag).score('temporal')
     assert scorer.scored_frames > 0

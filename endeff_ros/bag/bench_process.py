@@ -28,6 +28,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from endeff_ros.cli import print_json
+
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
@@ -204,10 +206,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run :func:`bench_process` and print its JSON."""
     result = bench_process(frames=args.frames, bags=args.bags, storage=args.storage)
-    text = json.dumps(result, indent=1)
-    print(text)
-    if args.json:
-        Path(args.json).write_text(text + '\n', encoding='utf-8')
+    print_json(result, args.json)
     return 0 if not (result['one_core']['errors'] or result['n_processes']['errors']) else 1
 
 

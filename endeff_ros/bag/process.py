@@ -39,6 +39,7 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
+from endeff_ros.cli import load_params_option
 from endeff_ros.core.errors import EndeffError, InputError
 
 from .errors import BagError
@@ -395,16 +396,7 @@ def process_bags(inputs: Sequence[str | Path], output: str | Path, *, jobs: int 
 
 def run(args: argparse.Namespace) -> int:
     """``endeff process``: 0 if every bag was processed, 1 if any failed, 2 on bad options."""
-    params = None
-    if args.params:
-        from endeff_ros.core.params import load_yaml
-
-        try:
-            params = load_yaml(args.params)
-        except (OSError, EndeffError) as err:
-            print(f'endeff process: cannot load parameters {args.params}: {err}',
-                  file=sys.stderr)
-            return 2
+    params = load_params_option(args.params, 'endeff process')
     if args.jobs is not None and args.jobs < 1:
         print('endeff process: --jobs must be >= 1', file=sys.stderr)
         return 2

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from endeff_ros.cli import print_json
 from endeff_ros.ros.procs import ros_env, start, stop
 
 TOPIC = '/endeff_dds_bench/image'
@@ -157,11 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     results = [run_one(profile=profile, reliability=rel, seconds=args.seconds, rate=args.rate,
                        width=args.width, height=args.height)
                for profile in (True, False) for rel in ('best_effort', 'reliable')]
-    text = json.dumps({'dds_image_transport': results}, indent=2)
-    print(text)
-    if args.json:
-        with open(args.json, 'w', encoding='utf-8') as fh:
-            fh.write(text + '\n')
+    print_json({'dds_image_transport': results}, args.json)
     return 0
 
 

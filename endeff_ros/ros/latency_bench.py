@@ -15,12 +15,13 @@ JSON-ready dict.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import tempfile
 from pathlib import Path
 from typing import Any
+
+from endeff_ros.cli import print_json
 
 DEFAULT_SEQUENCE = 'jumping_jacks'
 
@@ -93,10 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     result = ros_latency_bench(args.bag, rate_hz=args.rate, loops=args.loops,
                                profile=not args.no_profile, max_frames=args.max_frames)
-    text = json.dumps(result, indent=2)
-    print(text)
-    if args.json:
-        Path(args.json).write_text(text + '\n', encoding='utf-8')
+    print_json(result, args.json)
     return 0
 
 

@@ -25,7 +25,6 @@ import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from visualization_msgs.msg import MarkerArray
@@ -42,6 +41,7 @@ from endeff_ros.ros.processing import (
     updated_params,
     validate_node_changes,
 )
+from endeff_ros.ros.procs import spin
 from endeff_ros.ros.ros_params import descriptor, qos
 from endeff_ros.sync import ApproximateTimeSynchronizer
 
@@ -323,17 +323,7 @@ def main(args: list[str] | None = None) -> None:
     # One OpenCV thread: the node already runs DDS, executor and worker threads, and on a
     # robot's shared CPU a second flow thread only adds contention (measured: latency_bench).
     cv2.setNumThreads(1)
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = EndeffNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    spin(EndeffNode, args)
 
 
 if __name__ == '__main__':

@@ -12,12 +12,11 @@ from __future__ import annotations
 
 from typing import Any
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import Image, PointCloud2
 
 from endeff_ros.ros import convert
+from endeff_ros.ros.procs import spin
 from endeff_ros.ros.ros_params import qos
 
 
@@ -38,17 +37,7 @@ class RelayNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point: spin the relay until interrupted."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = RelayNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    spin(RelayNode, args)
 
 
 if __name__ == '__main__':
