@@ -244,11 +244,12 @@ def test_unknown_and_wrong_typed_values_are_rejected(tmp_path: Path) -> None:
     assert EndeffParams.from_dict({'band_delta': 1}).band_delta == 1.0
 
 
-@pytest.mark.xfail(strict=True, reason='EndeffParams(...) and .replace() do not type-check '
-                   'values (only from_dict does); remove this mark once __post_init__ does')
 def test_constructor_rejects_wrong_types() -> None:
-    with pytest.raises(ParameterError):
+    with pytest.raises(ParameterError, match='band_eta'):
         EndeffParams(band_eta='4')  # type: ignore[arg-type]
+    with pytest.raises(ParameterError, match='floor_removal'):
+        EndeffParams().replace(floor_removal=1)
+    assert EndeffParams(band_delta=1).band_delta == 1  # an int where a float is expected
 
 
 # --- the algorithm core never imports ROS ----------------------------------------------------

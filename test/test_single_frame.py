@@ -175,11 +175,6 @@ TIP_XFAILS = {
     't_pose-seed1': _xfail(HEAD_OFF.format(0.108, 0.10)),
     'arms_down-seed0': _xfail(HEAD_OFF.format(0.118, 0.11)),
     'arms_down-seed1': _xfail(HEAD_OFF.format(0.105, 0.10)),
-    'chair-yaw0.5-seed0': _xfail(
-        'the foot of the back-left leg (under the backrest post, tip (-0.08, 0.34, 2.671)) is '
-        'not found (5 candidates for 6 tips): the leg is banded (bands 28-33) but its sub-bands '
-        'are not attached to the rest of the graph, so their geodesic to the root is inf; the '
-        'leg is visible (82 points within 7 cm of the tip)'),
     'chair-yaw0.5-seed1': _xfail(
         'foot of the back-right leg (tip (0.271, 0.34, 2.48)) found 0.056 m away (> 0.05); '
         'the other 5 tips within 0.043 m'),
@@ -279,11 +274,7 @@ def test_person_hands_and_feet(pose, seed):
 
 TURNS = {'pitch-down': (math.radians(10), 0.0, 0.0), 'pitch-up': (math.radians(-10), 0.0, 0.0),
          'yaw': (0.0, math.radians(10), 0.0), 'roll': (0.0, 0.0, math.radians(10))}
-TURN_XFAILS = {
-    'star4-pitch-down': _xfail(
-        'one limb tip found 0.053 m away (> 0.05); the other three within 0.036 m (the same '
-        'star seen by a level camera: all within 0.04 m)'),
-}
+TURN_XFAILS: dict[str, pytest.MarkDecorator] = {}
 
 
 @pytest.mark.parametrize('rotvec, n', [
@@ -476,11 +467,6 @@ def test_sparse_points_are_not_banded():
     assert est.unreachable == np.count_nonzero((est.entity >= 0) & (est.band == UNREACHED))
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    'a sparse point beside an entity (within δ_L of its points, but with only 3 neighbours '
-    '< η_L = 4) is UNREACHED as it should be, but it is given entity -1 (entities hold dense '
-    'points only), so FrameEstimate.unreachable stays 0 instead of counting it '
-    '(measured: entity label -1, unreachable 0, expected >= 1)'))
 def test_sparse_points_of_an_entity_are_counted_unreachable():
     points = _line(100, 0.01)
     stray = np.array([[0.99 + 0.055, 0.0, 2.0]])  # beyond the end: neighbours at 5.5, 6.5 cm

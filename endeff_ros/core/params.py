@@ -113,6 +113,12 @@ class EndeffParams:
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
+            want = type(f.default)
+            ok = (isinstance(value, (int, float)) and not isinstance(value, bool)
+                  if want is float else type(value) is want)
+            if not ok:
+                msg = f'parameter {f.name} must be {want.__name__}, got {value!r}'
+                raise ParameterError(msg)
             lo, hi = f.metadata['lo'], f.metadata['hi']
             if isinstance(value, bool) or isinstance(value, str):
                 continue

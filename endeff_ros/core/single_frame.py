@@ -145,6 +145,11 @@ def _entities(points: npt.NDArray[np.float64], graph: Neighbours,
     remap[order] = np.arange(order.size)
     label = remap[comp]
     label[~dense] = -1
+    # Sparse points (failing Eq. 3) next to an entity belong to it: they are never banded,
+    # and so are counted as unreachable instead of vanishing from the report.
+    for a, b in ((graph.i, graph.j), (graph.j, graph.i)):
+        stray = ~dense[a] & dense[b] & (label[b] >= 0)
+        label[a[stray]] = label[b[stray]]
     return label
 
 
