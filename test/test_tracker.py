@@ -191,13 +191,6 @@ def test_clap_contact_tracker_keeps_both_hands():
                                    for t in r.results[i].tracks])
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    'measured (core 8a5ce49): in all 3 contact frames a track sits on the spurious elbow '
-    'candidate (0.3 m from the midline, 0.37-0.46 m from the hands). The elbow tracks start '
-    'while the hands close (frames 3-4): the single-frame estimate finds the elbows, not the '
-    'hands, and the hand predictions rectify to graph nodes unreachable from the root (Eq. 7 '
-    'nan, geodesic inf to every candidate), so they are case C and never compete with the '
-    'elbow candidates, which then match their own tracks (case A)'))
 def test_clap_contact_spurious_candidate_not_tracked():
     """Fig. 7b: the merged hands give a spurious candidate (on an elbow); the memorised hand
     wins the comparison and the spurious candidate is dropped, so no track sits there."""

@@ -100,8 +100,10 @@ class EndeffParams:
     similarity_scale: float = _p(0.1, 'Similarity = 1 / (1 + geodesic / scale) between two '
                                  'candidates in the current graph.', unit='m', lo=0.001,
                                  hi=10.0)
-    keep_frames: int = _p(5, 'Case C: an unmatched predicted end-effector is kept at most '
+    keep_frames: int = _p(10, 'Case C: an unmatched predicted end-effector is kept at most '
                           'this many frames.', symbol='T', lo=0, hi=1000)
+    confirm_hits: int = _p(3, 'Case C keeps only tracks that current candidates supported in '
+                           'at least this many frames (1: every track).', lo=1, hi=1000)
     memory_sigma: float = _p(0.8, 'Geodesic memory penalty, α = σ^k (Eqs. 8-9).', symbol='σ',
                              lo=0.0, hi=1.0)
     duplicate_distance: float = _p(0.05, 'A predicted end-effector closer than this to a '

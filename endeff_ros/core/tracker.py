@@ -87,6 +87,7 @@ class _TrackState:
     path: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
     detected: bool = True
     offset: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    hits: int = 1  # frames in which a current candidate supported the track
 
 
 @dataclass(frozen=True)
@@ -301,6 +302,8 @@ class Tracker:
                     continue
                 if track.missed + 1 > p.keep_frames:
                     continue  # case C for more than T frames: removed
+                if track.hits < p.confirm_hits:
+                    continue  # never confirmed: a one-off candidate is not kept alive
                 pred_geo = self._memory(track, pr.geodesic_now, related=False)
                 self._take_prediction(track, pr, pred_geo, missed=True)
                 survivors.append(track)
@@ -350,6 +353,7 @@ class Tracker:
         track.not_related = 0 if related else track.not_related + 1
         track.missed = 0
         track.age += 1
+        track.hits += 1
         track.detected = True
 
     @staticmethod
