@@ -135,13 +135,6 @@ def test_touch_torso_single_frame_loses_the_hand():
     assert span[-1] < len(r.shots) - 2  # it shows the hand again afterwards
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    'measured (core 8a5ce49): one frame before contact (frame 6) the single-frame estimate '
-    'has lost the hand and shows a spurious candidate on the far (left) hip; the hand track '
-    '(its Eq. 7 memory down to 0.32 m while the hand neared the hip) is paired with it as an '
-    'unrelated pair (case B), the candidate (0.48 m) wins and the track jumps 0.37 m across '
-    'the body. In contact it is 0.33-0.35 m from the hand; the hand comes back as a new id '
-    '(5). With core f8c6a01 this test passed (hand track 0.06-0.07 m in contact, same id)'))
 def test_hand_touching_torso_keeps_its_track_and_id():
     r = touch_run()
     span = _touch_lost_span(r)

@@ -21,8 +21,9 @@ Per frame t+1:
 6. **Selection**: in case B the candidate with the longer approximate geodesic distance
    (Eq. 7, memorised by Eq. 8 for predictions) survives; a case-C prediction is kept at most
    T frames; an unmatched current candidate starts a new track. In case A the pair is one
-   end-effector; its position is the current detection: the paper favours "the natural
-   detection of end-effectors" and the prediction only guides it when needed.
+   end-effector: the longer geodesic distance is kept, the position is the current detection
+   (the paper favours "the natural detection of end-effectors"; the prediction only guides it
+   when needed).
 7. **Memory** (Eqs. 8-9): a track's geodesic distance is
    ``α d(e_t) + (1 - α) d(e^pr_{t+1})`` with ``α = σ^k`` while it lives on predictions, k the
    frames since it was last related; a detection takes its current Eq. 7 value.
@@ -347,7 +348,13 @@ class Tracker:
     def _take_detection(track: _TrackState, cand: Candidate, entity: int, *,
                         related: bool) -> None:
         track.position = cand.position
-        track.geodesic = cand.geodesic_approx  # Eq. 8, second case
+        if related:
+            # Case A: the pair is one end-effector and the longer geodesic distance is
+            # selected; with α = σ^0 = 1 the memorised one survives (Eq. 8), which keeps a
+            # hand's distance while it approaches the body (Fig. 3b).
+            track.geodesic = max(track.geodesic, cand.geodesic_approx)
+        else:
+            track.geodesic = cand.geodesic_approx  # Eq. 8, second case
         track.entity = entity
         track.path = cand.path
         track.not_related = 0 if related else track.not_related + 1
