@@ -76,7 +76,13 @@ def estimate_frame(frame: RGBDFrame, params: EndeffParams | None = None, *,
 
 def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None = None, *,
                     timer: _StageTimer | None = None) -> FrameEstimate:
-    """Section 4 on a foreground cloud (N, 3), metres, optical frame."""
+    """Section 4 on a foreground cloud (N, 3), metres, optical frame.
+
+    Density (Eq. 3) and entities, the root (refined centroid of the first N bands), narrow
+    bands (Eqs. 1-4), sub-bands, the attachment graph (Eq. 5) and its all-pairs geodesics
+    (Eq. 6), then per entity the iterated Dijkstra's end-effectors with their Eq. 6 and Eq. 7
+    distances. Usable without any image (clouds from any source).
+    """
     params = params or EndeffParams()
     timer = timer or _StageTimer()
     neighbours = Neighbours.build(points, max(params.band_delta, params.attach_distance))
@@ -109,9 +115,9 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
         root = points[seed]
         candidates = []
         dist_root = graph.dist[root_node]
-        for node, path, protrusion in find_end_effectors(graph, root_node,
-                                             min_geodesic=params.min_geodesic,
-                                             max_count=params.max_end_effectors):
+        found = find_end_effectors(graph, root_node, min_geodesic=params.min_geodesic,
+                                   max_count=params.max_end_effectors)
+        for node, path, protrusion in found:
             position = _tip_position(points, members, graph, path, dist_root, params)
             candidates.append(Candidate(
                 position=position, node=node, geodesic=geodesic(graph, path),
