@@ -273,13 +273,13 @@ class Tracker:
         for i, pr in enumerate(preds):
             track = pr.track
             j = matched_pred.get(i)
+            pred_geo = self._memory(track, pr.geodesic_now)  # if it lives on its prediction
             case = 'C'
             if j is not None:
                 cand = cands[j]
                 if sim[i, j] > p.related_similarity:
                     case = 'A'
                 else:
-                    pred_geo = self._memory(track, pr.geodesic_now, related=False)
                     eps_b_geo = p.unrelated_ratio * max(pred_geo, cand.geodesic_approx)
                     case = 'B' if geo[i, j] < eps_b_geo else 'C'
             if case == 'A':
@@ -290,7 +290,6 @@ class Tracker:
             elif case == 'B':
                 cand = cands[j]
                 used_cands.add(j)
-                pred_geo = self._memory(track, pr.geodesic_now, related=False)
                 if cand.geodesic_approx >= pred_geo:
                     # The current candidate wins (Fig. 7c): the track follows it.
                     self._take_detection(track, cand, cand_entity[j], related=False)
@@ -299,13 +298,12 @@ class Tracker:
                     self._take_prediction(track, pr, pred_geo, missed=False)
                 survivors.append(track)
             else:
-                if pr.node < 0 and np.isnan(pr.geodesic_now) and self._left_view(pr):
-                    continue
+                if pr.node < 0:
+                    continue  # farther than max_rectify_distance: it left the foreground
                 if track.missed + 1 > p.keep_frames:
                     continue  # case C for more than T frames: removed
                 if track.hits < p.confirm_hits:
                     continue  # never confirmed: a one-off candidate is not kept alive
-                pred_geo = self._memory(track, pr.geodesic_now, related=False)
                 self._take_prediction(track, pr, pred_geo, missed=True)
                 survivors.append(track)
         for j, cand in enumerate(cands):
@@ -332,13 +330,10 @@ class Tracker:
             kept.append(t)
         return sorted(kept, key=lambda t: t.id)
 
-    def _left_view(self, pr: _Prediction) -> bool:
-        """True when a prediction is far from every current point (it left the foreground)."""
-        return pr.node < 0
-
-    def _memory(self, track: _TrackState, geodesic_now: float, *, related: bool) -> float:
-        """Eq. 8 for a track that continues on its prediction (α = σ^k, Eq. 9)."""
-        k = 0 if related else track.not_related + 1
+    def _memory(self, track: _TrackState, geodesic_now: float) -> float:
+        """Eq. 8 for a track that continues on its prediction: α = σ^k (Eq. 9), k counting
+        this frame, in which it is not related to any candidate."""
+        k = track.not_related + 1
         alpha = self.params.memory_sigma ** k
         if not np.isfinite(geodesic_now):
             return track.geodesic * alpha
