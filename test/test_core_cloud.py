@@ -387,3 +387,18 @@ def test_parameter_dict_errors():
     with pytest.raises(ParameterError, match=r'parameter band_eta must be int'):
         EndeffParams.from_dict({'band_eta': 2.5})
     assert EndeffParams.from_dict({'band_delta': 1}).band_delta == 1.0
+
+
+def test_depth_median_removes_a_flying_pixel_and_fills_a_pinhole():
+    """The optional 3x3 median: a lone pixel 1 m behind a plane disappears, a one-pixel hole
+    in the plane is filled, and without the option both are kept as they are."""
+    k = Intrinsics(525.0, 525.0, 31.5, 23.5, 64, 48)
+    depth = np.full((48, 64), 2.0, dtype=np.float32)
+    depth[20, 30] = 3.0  # flying pixel
+    depth[10, 10] = np.nan  # pinhole
+    raw = depth_to_points(depth, k)
+    filtered = depth_to_points(depth, k, median=True)
+    assert np.count_nonzero(raw[:, 2] > 2.5) == 1 and len(raw) == 48 * 64 - 1
+    assert np.count_nonzero(filtered[:, 2] > 2.5) == 0
+    assert len(filtered) == 48 * 64
+    np.testing.assert_allclose(filtered[:, 2], 2.0)
