@@ -21,7 +21,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from endeff_ros.cli import print_json
+from endeff_ros.cli import load_params_option, print_json
 
 DEFAULT_SEQUENCE = 'jumping_jacks'
 
@@ -39,7 +39,8 @@ def _default_bag(tmp: Path) -> Path:
 
 def ros_latency_bench(bag: str | Path | None = None, *, rate_hz: float = 30.0,
                       loops: int = 3, profile: bool = True,
-                      max_frames: int | None = None) -> dict[str, Any]:
+                      max_frames: int | None = None,
+                      node_params: dict[str, Any] | None = None) -> dict[str, Any]:
     """Replay ``bag`` (default: a synthetic sequence) at ``rate_hz``; node vs relay latency.
 
     Returns ``{'bag', 'rate_hz', 'fastdds_profile', 'node': {...}, 'relay': {...},
@@ -51,7 +52,8 @@ def ros_latency_bench(bag: str | Path | None = None, *, rate_hz: float = 30.0,
     with tempfile.TemporaryDirectory(prefix='endeff_bench_') as tmp:
         path = Path(bag) if bag is not None else _default_bag(Path(tmp))
         record = run_session(path, rate_hz=rate_hz, relay=True, profile=profile,
-                             max_frames=max_frames, loops=loops, frame_timeout_s=5.0)
+                             max_frames=max_frames, loops=loops, frame_timeout_s=5.0,
+                             node_params=node_params)
     diag = record.get('diagnostics', {})
     keys = ('processed', 'skipped', 'colorless', 'dropped_unpaired.color',
             'dropped_unpaired.depth', 'processing_ms.p50', 'processing_ms.p95',
@@ -91,9 +93,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--no-profile', action='store_true',
                         help='run without the Fast DDS SHM profile (for comparison)')
     parser.add_argument('--json', help='also write the result to this file')
+    parser.add_argument('--params', metavar='YAML', help='node parameter file (e.g. the fast '
+                        'preset config/endeff_fast.yaml)')
     args = parser.parse_args(argv)
+    params = load_params_option(args.params, 'latency_bench')
     result = ros_latency_bench(args.bag, rate_hz=args.rate, loops=args.loops,
-                               profile=not args.no_profile, max_frames=args.max_frames)
+                               profile=not args.no_profile, max_frames=args.max_frames,
+                               node_params=params.to_dict() if params else None)
     print_json(result, args.json)
     return 0
 
