@@ -52,7 +52,9 @@ def load_params_option(path: str | None, prog: str) -> Any:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='endeff', description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog='endeff', description='endeff_ros tools: end-effectors of people and articulated '
+        'entities in RGB-D data (Lin, Pardas & Casas, 2016). `endeff COMMAND -h` for help.')
     sub = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
     for name, (_, helptext) in SUBCOMMANDS.items():
         sub.add_parser(name, help=helptext, add_help=False)
