@@ -289,6 +289,23 @@ def test_module_does_not_import_ros(module: str) -> None:
     assert proc.returncode == 0, proc.stderr[-3000:]
 
 
+_NO_PIP_ONLY = ('import importlib, sys\n'
+                'importlib.import_module(sys.argv[1])\n'
+                "bad = sorted(m for m in sys.modules if m.split('.')[0] in "
+                "('rosbags', 'mcap', 'mcap_ros2', 'matplotlib', 'colcon_core'))\n"
+                'assert not bad, f"{sys.argv[1]} imports pip-only packages: {bad[:5]}"\n')
+
+
+@pytest.mark.parametrize('module', ['endeff_ros.ros.node', 'endeff_ros.ros.convert',
+                                    'endeff_ros.core.tracker'])
+def test_node_needs_no_pip_only_package(module: str) -> None:
+    """On a robot with apt-installed Jazzy the node runs without the PyPI-only tools."""
+    proc = subprocess.run([sys.executable, '-c', _NO_PIP_ONLY, module], cwd=REPO,
+                          env=_clean_env(PYTHONPATH=str(REPO)), capture_output=True, text=True,
+                          timeout=120, check=False)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+
+
 # --- lint, package.xml, setup.cfg --------------------------------------------------------------
 
 def test_ruff_passes() -> None:
