@@ -279,7 +279,8 @@ def _merge_small(graph: Neighbours, sub: npt.NDArray[np.intp], counts: npt.NDArr
 def _cap_subbands(points: npt.NDArray[np.float64], sub: npt.NDArray[np.intp],
                   big: npt.NDArray[np.intp], counts: npt.NDArray[np.intp],
                   max_points: int) -> npt.NDArray[np.intp]:
-    """Cut each oversized sub-band into ceil(n / max_points) slices along its main axis."""
+    """Cut each oversized sub-band into ceil(n / max_points) slices along its main axis; the
+    new slices get the labels after ``counts.size - 1``."""
     sub = sub.copy()
     next_label = int(counts.size)
     for label in big:  # one iteration per oversized sub-band, not per point
@@ -290,12 +291,7 @@ def _cap_subbands(points: npt.NDArray[np.float64], sub: npt.NDArray[np.intp],
         pieces = int(np.ceil(len(members) / max_points))
         rank = np.argsort(np.argsort(proj))
         slot = rank * pieces // len(members)
-        for s in range(1, pieces):
+        for s in range(1, pieces):  # slice 0 keeps the label: labels stay compact
             sub[members[slot == s]] = next_label
             next_label += 1
-    # Renumber to keep labels ordered by band (the caller relies only on uniqueness, but
-    # compact labels keep node arrays small).
-    _, sub_compact = np.unique(sub, return_inverse=True)
-    out = sub_compact.astype(np.intp) - (1 if (sub == UNREACHED).any() else 0)
-    out[sub == UNREACHED] = UNREACHED
-    return out
+    return sub

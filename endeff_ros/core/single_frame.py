@@ -30,7 +30,6 @@ class EntityEstimate:
     graph: TopologyGraph
     point_index: npt.NDArray[np.intp]
     root_node: int = 0
-    rough_root: npt.NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True)
@@ -92,7 +91,7 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
     entity = _entities(points, within, dense, params.min_entity_points, params.entity_gap)
     timer.lap('neighbours')
 
-    seeds, rough_roots = _roots(points, within, dense, entity, params)
+    seeds = _roots(points, within, dense, entity, params)
     bridges: list[tuple[int, int]] = []
     band = expand_bands(within, dense, seeds, params.band_delta, points=points, entity=entity,
                         bridge_gap=params.entity_gap, bridges=bridges)
@@ -125,7 +124,7 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
                 path=graph.centroids[path], protrusion=protrusion))
         entities.append(EntityEstimate(entity=e, root=root, candidates=candidates,
                                        graph=graph, point_index=np.flatnonzero(entity == e),
-                                       root_node=root_node, rough_root=rough_roots[e]))
+                                       root_node=root_node))
     timer.lap('extrema')
     unreachable = int(np.count_nonzero((entity >= 0) & (band == UNREACHED)))
     return FrameEstimate(points=points, band=band, subband=subband, entity=entity,
@@ -197,20 +196,18 @@ def _merge_close(points: npt.NDArray[np.float64], comp: npt.NDArray[np.intp],
 
 def _roots(points: npt.NDArray[np.float64], graph: Neighbours,
            dense: npt.NDArray[np.bool_], entity: npt.NDArray[np.intp],
-           params: EndeffParams) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.float64]]:
+           params: EndeffParams) -> npt.NDArray[np.intp]:
     """Graph root per entity (Section 4.2): the point nearest the centroid starts a rough
     expansion; the centroid of its first N bands, snapped to the nearest point, is the root."""
     n_entities = int(entity.max()) + 1 if entity.size else 0
     if n_entities == 0:
-        return np.zeros(0, dtype=np.intp), np.zeros((0, 3))
+        return np.zeros(0, dtype=np.intp)
     rough = np.array([_nearest(points, entity == e, _centroid(points, entity == e))
                       for e in range(n_entities)], dtype=np.intp)
     bands = expand_bands(graph, dense, rough, params.band_delta, max_bands=params.root_bands)
     massive = (bands != UNREACHED) & (entity >= 0)
-    seeds = np.array([_nearest(points, entity == e,
-                               _centroid(points, massive & (entity == e)))
-                      for e in range(n_entities)], dtype=np.intp)
-    return seeds, points[rough]
+    return np.array([_nearest(points, entity == e, _centroid(points, massive & (entity == e)))
+                     for e in range(n_entities)], dtype=np.intp)
 
 
 def _centroid(points: npt.NDArray[np.float64],
