@@ -135,6 +135,31 @@ def test_propagate_points_on_a_translating_textured_plane() -> None:
     np.testing.assert_allclose(out, expected, atol=0.02)
 
 
+def test_propagate_points_with_a_flow_region_equals_the_full_flow_there() -> None:
+    """A region of interest of the flow (``flow_origin``) gives the same prediction as the
+    full image for points whose windows lie inside it, and zero motion for points outside."""
+    z0 = 2.0
+    prev, cur = _shifted_pair(8.0, -5.0, seed=3)
+    flow = FlowEstimator().flow(prev, cur)
+    inside = np.array([[0.0, 0.0, z0], [0.1, 0.05, z0]])  # project near the image centre
+    outside = np.array([[-0.9, -0.6, z0]])  # projects near the top-left corner
+    points = np.concatenate([inside, outside])
+    d0, d1 = _depth(z0), _depth(z0)
+    full, _ = propagate_points(points, flow, d0, d1, K)
+    v0, v1, u0, u1 = 150, 330, 220, 420
+    region, reliable = propagate_points(points, flow[v0:v1, u0:u1], d0, d1, K,
+                                        flow_origin=(u0, v0))
+    np.testing.assert_array_equal(region[:2], full[:2])
+    assert reliable[:2].all() and not reliable[2]
+    assert np.abs(full[2] - outside[0]).max() > 0.01  # it does move with the full flow ...
+    np.testing.assert_allclose(region[2], outside[0])  # ... and not without flow there
+    empty, _ = propagate_points(points, np.zeros((0, 0, 2), np.float32), d0, d1, K,
+                                flow_origin=(0, 0))
+    np.testing.assert_allclose(empty, points)
+    with pytest.raises(InputError, match='does not fit'):
+        propagate_points(points, flow[v0:v1, u0:u1], d0, d1, K, flow_origin=(u0, 400))
+
+
 def test_propagate_points_takes_the_motion_of_its_own_surface() -> None:
     """A finger (3 px wide bar at 1.5 m, moving 10 px right) over a torso (2.5 m, static): most
     of a 7x7 window around a point on the finger sees the torso, yet the point must take the

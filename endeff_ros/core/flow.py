@@ -159,12 +159,11 @@ class FlowEstimator:
             small = cv2.calcOpticalFlowFarneback(prev, cur, None, *FARNEBACK_PARAMS)
         if (sw, sh) == (w, h):
             return np.ascontiguousarray(small, dtype=np.float32)
-        full = cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
-        if w * sh == h * sw:
-            full *= np.float32(w / sw)
-        else:
-            full *= np.array([w / sw, h / sh], dtype=np.float32)
-        return full
+        # Scale the vectors to full-resolution pixels before upsampling (4x fewer pixels;
+        # bilinear upsampling is linear, so the order does not matter).
+        small[:, :, 0] *= np.float32(w / sw)
+        small[:, :, 1] *= np.float32(h / sh)
+        return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
 
 
 def flow_benchmark(**kwargs: Any) -> dict[str, Any]:
@@ -188,6 +187,8 @@ def _gather(image: npt.NDArray[Any], rows: npt.NDArray[Any],
             cols: npt.NDArray[Any]) -> npt.NDArray[np.float64]:
     """``image[rows, cols]`` as float64 for (N, K) float pixel indices; outside -> NaN."""
     h, w = image.shape[:2]
+    if h == 0 or w == 0:
+        return np.full(rows.shape + image.shape[2:], np.nan)
     with np.errstate(invalid='ignore'):
         inside = (rows >= 0) & (rows <= h - 1) & (cols >= 0) & (cols <= w - 1)  # NaN: False
     r = np.where(inside, rows, 0).astype(np.intp)
@@ -228,6 +229,7 @@ def _check_image(name: str, image: Any, shape: tuple[int, ...]) -> npt.NDArray[A
 def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
                      prev_depth: npt.NDArray[np.float32], cur_depth: npt.NDArray[np.float32],
                      intrinsics: Intrinsics, *, window: int = 7, depth_tolerance: float = 0.1,
+                     flow_origin: tuple[int, int] | None = None,
                      ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
     """Move 3D points of frame t to frame t+1 with optical flow and depth (3D scene flow).
 
@@ -248,6 +250,10 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
     depth_tolerance:
         Metres. A pixel of the window belongs to the point's surface if its depth is within this
         of the point's depth (frame t) or of the expected depth (frame t+1).
+    flow_origin:
+        ``None``: ``flow`` covers the image. ``(u0, v0)``: ``flow`` covers only a region of
+        interest (any size inside the image, possibly empty) whose top-left pixel is
+        (u0, v0); pixels outside it have no flow.
 
     Returns
     -------
@@ -284,7 +290,15 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
         msg = f'depth_tolerance must be a positive number of metres, got {depth_tolerance!r}'
         raise InputError(msg)
     h, w = intrinsics.height, intrinsics.width
-    flow = _check_image('flow', flow, (h, w, 2))
+    if flow_origin is None:
+        flow, u0, v0 = _check_image('flow', flow, (h, w, 2)), 0, 0
+    else:
+        flow, (u0, v0) = np.asarray(flow), flow_origin
+        if not (flow.ndim == 3 and flow.shape[2] == 2 and 0 <= u0 and 0 <= v0
+                and u0 + flow.shape[1] <= w and v0 + flow.shape[0] <= h):
+            msg = (f'flow region of shape {flow.shape} at (u, v) = ({u0}, {v0}) does not fit '
+                   f'the {w}x{h} image of the camera info')
+            raise InputError(msg)
     prev_depth = _check_image('previous depth', prev_depth, (h, w))
     cur_depth = _check_image('current depth', cur_depth, (h, w))
     n = pts.shape[0]
@@ -306,7 +320,7 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
         """Median flow (du, dv), neighbourhood Δz and enough-valid flag of points ``sel``."""
         dr, dc = _offsets(win)
         rows, cols = vr[sel, None] + dr, ur[sel, None] + dc
-        f = _gather(flow, rows, cols)
+        f = _gather(flow, rows - v0, cols - u0)
         d0 = _gather(prev_depth, rows, cols)
         with np.errstate(invalid='ignore'):
             ok = (np.isfinite(f).all(axis=2) & (d0 > 0)
