@@ -275,10 +275,11 @@ def _merge_small(graph: Neighbours, sub: npt.NDArray[np.intp], counts: npt.NDArr
     first = np.r_[True, src[order][1:] != src[order][:-1]]
     remap = np.arange(s)
     remap[src[order][first]] = dst[order][first]
-    out = sub.copy()
-    reached = sub != UNREACHED
-    _, out[reached] = np.unique(remap[sub[reached]], return_inverse=True)
-    return out
+    remap = np.r_[remap, UNREACHED]  # index -1 (unreached) stays unreached
+    used = np.zeros(s, dtype=bool)
+    used[remap[:-1]] = True
+    compact = np.r_[np.cumsum(used) - 1, UNREACHED]  # labels stay 0..S'-1, in order
+    return compact[remap[sub]]
 
 
 def _cap_subbands(points: npt.NDArray[np.float64], sub: npt.NDArray[np.intp],
@@ -290,12 +291,12 @@ def _cap_subbands(points: npt.NDArray[np.float64], sub: npt.NDArray[np.intp],
     next_label = int(counts.size)
     for label in big:  # one iteration per oversized sub-band, not per point
         members = np.flatnonzero(sub == label)
-        pts = points[members] - points[members].mean(axis=0)
-        _, _, vt = np.linalg.svd(pts, full_matrices=False)
-        proj = pts @ vt[0]
+        pts = points[members]
+        pts = pts - pts.mean(axis=0)
+        main_axis = np.linalg.eigh(pts.T @ pts)[1][:, -1]  # largest-variance direction
         pieces = int(np.ceil(len(members) / max_points))
-        rank = np.argsort(np.argsort(proj))
-        slot = rank * pieces // len(members)
+        slot = np.empty(len(members), dtype=np.intp)
+        slot[np.argsort(pts @ main_axis)] = np.arange(len(members)) * pieces // len(members)
         for s in range(1, pieces):  # slice 0 keeps the label: labels stay compact
             sub[members[slot == s]] = next_label
             next_label += 1

@@ -152,7 +152,7 @@ def _entities(points: npt.NDArray[np.float64], graph: Neighbours,
     label[~dense] = -1
     # Sparse points (failing Eq. 3) next to an entity belong to it: they are never banded,
     # and so are counted as unreachable instead of vanishing from the report.
-    for a, b in ((graph.i, graph.j), (graph.j, graph.i)):
+    for a, b in ((graph.i, graph.j), (graph.j, graph.i)) if not dense.all() else ():
         stray = ~dense[a] & dense[b] & (label[b] >= 0)
         label[a[stray]] = label[b[stray]]
     return label

@@ -40,11 +40,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.spatial import cKDTree
 
 from .bands import UNREACHED
 from .cloud import FloorPlane
 from .flow import FlowEstimator, propagate_points
+from .nearest import nearest_point
 from .graph import approximate_geodesic, path_to_sources
 from .params import EndeffParams
 from .single_frame import FrameEstimate, estimate_frame
@@ -155,7 +155,7 @@ class Tracker:
         if len(estimate.points) == 0:
             offsets = np.zeros_like(positions)
         else:
-            _, nearest = cKDTree(estimate.points).query(positions)
+            _, nearest = nearest_point(estimate.points, positions)
             offsets = positions - estimate.points[nearest]
         for track, offset in zip(self._tracks, offsets):
             track.offset = offset
@@ -211,7 +211,7 @@ class Tracker:
         if usable.size == 0:
             return [_Prediction(t, predicted[i] + t.offset, -1, t.entity, np.nan)
                     for i, t in enumerate(self._tracks)]
-        dist, nearest = cKDTree(pts[usable]).query(predicted)
+        dist, nearest = nearest_point(pts[usable], predicted)
         for i, track in enumerate(self._tracks):
             if dist[i] > p.max_rectify_distance:
                 out.append(_Prediction(track, predicted[i] + track.offset, -1, track.entity,
