@@ -601,14 +601,17 @@ def test_build_graph_weights_are_centroid_distances():
     assert np.all(np.isfinite(dist))
 
 
-def _two_subbands(near_points):
+def _two_subbands(near_points, *, joined_by=False):
     """Sub-band A (a sparse row) and B (a tight cluster) where ``near_points`` points of A are
-    within λ = 5 cm of B and all of B's points are within λ of A."""
+    within λ = 5 cm of B and all of B's points are within λ of A. With ``joined_by``, a third
+    sub-band C (a dense row 4 cm beside A, reaching B) is attached to both, so A and B are in
+    one graph piece whatever their own attachment."""
     a = [[x, 0.0, 2.0] for x in (0.0, 0.1, 0.2, 0.3)]
     a += [[0.5 - 0.01 * i, 0.0, 2.0] for i in range(near_points)]
     b = [[0.53, 0.0, 2.0], [0.535, 0.005, 2.0], [0.54, 0.0, 2.0], [0.535, -0.005, 2.0]]
-    points = np.array(a + b)
-    sub = np.array([0] * len(a) + [1] * len(b))
+    c = [[0.01 * i, 0.04, 2.0] for i in range(56)] if joined_by else []
+    points = np.array(a + b + c)
+    sub = np.array([0] * len(a) + [1] * len(b) + [2] * len(c))
     band = sub + 1
     return points, sub, band
 
@@ -620,16 +623,34 @@ def _two_subbands(near_points):
     (2, 3, False),  # B has 4 near points but A only 2
 ])
 def test_attachment_needs_p_points_on_both_sides(near_points, attach_points, attached):
-    points, sub, band = _two_subbands(near_points)
+    points, sub, band = _two_subbands(near_points, joined_by=True)
     graph = Neighbours.build(points, 0.06)
     g = build_graph(points, sub, band, graph, attach_distance=0.05,
                     attach_points=attach_points)
+    assert g.weights[0, 2] > 0 and g.weights[1, 2] > 0  # premise: one piece through C
     assert (g.weights[0, 1] > 0) == attached
     assert (g.weights[1, 0] > 0) == attached
 
 
+def test_pieces_the_expansion_connected_are_joined_once():
+    """Without C, A and B are two pieces that attachment (P = 2) leaves apart, though a point
+    of A is within δ_L of B (the band expansion crossed there): they are joined by one Eq. 5
+    edge. Pieces with no neighbouring points stay apart."""
+    points, sub, band = _two_subbands(1)
+    g = build_graph(points, sub, band, Neighbours.build(points, 0.06), attach_distance=0.05,
+                    attach_points=2)
+    assert g.weights[0, 1] == pytest.approx(np.linalg.norm(g.centroids[0] - g.centroids[1]))
+    far = points.copy()
+    far[sub == 1] += [0.2, 0.0, 0.0]
+    g = build_graph(far, sub, band, Neighbours.build(far, 0.06), attach_distance=0.05,
+                    attach_points=2)
+    assert g.weights[0, 1] == 0
+    assert not np.isfinite(g.dist[0, 1])
+
+
 def test_bridges_link_subbands_across_a_gap():
     points, sub, band = _two_subbands(1)
+    points[sub == 1] += [0.2, 0.0, 0.0]  # no neighbouring points: only the bridge joins them
     graph = Neighbours.build(points, 0.06)
     g = build_graph(points, sub, band, graph, attach_distance=0.05, attach_points=2,
                     bridges=[(0, len(points) - 1)])

@@ -110,6 +110,7 @@ def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
         sa, sb = subband[pairs[:, 0]], subband[pairs[:, 1]]
         ok = (sa != sb) & (sa != UNREACHED) & (sb != UNREACHED)
         attached[sa[ok], sb[ok]] = attached[sb[ok], sa[ok]] = True
+    _join_pieces(attached, centroids, subband[neighbours.i], subband[neighbours.j])
     rows, cols = np.nonzero(np.triu(attached, k=1))
     seg = centroids[rows] - centroids[cols]
     w = np.maximum(np.sqrt(np.einsum('ij,ij->i', seg, seg)), 1e-9)  # Eq. 5
@@ -122,6 +123,48 @@ def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
                              shape=(k, k))
     dist, pred = csgraph.dijkstra(both, directed=True, return_predecessors=True)
     return TopologyGraph(centroids, sizes, node_band, dense, dist, pred)
+
+
+def _join_pieces(attached: npt.NDArray[np.bool_], centroids: npt.NDArray[np.float64],
+                 si: npt.NDArray[np.intp], sj: npt.NDArray[np.intp]) -> None:
+    """Join graph pieces that attachment left apart but the band expansion connected.
+
+    Attachment asks for P points within λ on both sides; the expansion crosses wherever one
+    point is within δ_L. A chain it reached through fewer contact points (a forearm pointing
+    at the camera, seen only around its edge; a chair leg meeting the seat in a few points)
+    would be cut off from the root, and its end-effectors lost. Each such piece is linked to
+    the rest by its shortest link (Eq. 5 weight) among sub-band pairs with neighbouring points
+    (``si``, ``sj``: sub-bands of the two points of every neighbour pair), smallest first
+    (Kruskal over pieces), so pieces are joined exactly once and attached ones are unchanged.
+    Modifies ``attached`` in place.
+    """
+    k = len(attached)
+    if k < 2:
+        return
+    n_pieces, piece = csgraph.connected_components(sparse.csr_matrix(attached), directed=False)
+    if n_pieces < 2:
+        return
+    ok = (si != UNREACHED) & (sj != UNREACHED)
+    a, b = si[ok], sj[ok]
+    cross = piece[a] != piece[b]
+    if not cross.any():
+        return
+    links = np.unique(np.minimum(a[cross], b[cross]) * k + np.maximum(a[cross], b[cross]))
+    a, b = links // k, links % k
+    length = np.linalg.norm(centroids[a] - centroids[b], axis=1)
+    parent = np.arange(n_pieces)
+
+    def find(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    for m in np.argsort(length, kind='stable'):  # few links: one per piece boundary
+        ra, rb = find(int(piece[a[m]])), find(int(piece[b[m]]))
+        if ra != rb:
+            parent[ra] = rb
+            attached[a[m], b[m]] = attached[b[m], a[m]] = True
 
 
 def path_to_sources(pred: npt.NDArray[np.intp], node: int) -> npt.NDArray[np.intp]:
