@@ -99,14 +99,14 @@ class EndeffParams:
     unrelated_ratio: float = _p(1.0, 'Case B lower bound: ε_b is this factor over '
                                 '(1 + max(dist_G(e1), dist_G(e2))) as a similarity.',
                                 symbol='ε_b', lo=0.0, hi=10.0)
-    similarity_scale: float = _p(0.1, 'Similarity = 1 / (1 + geodesic / scale) between two '
+    similarity_scale: float = _p(0.15, 'Similarity = 1 / (1 + geodesic / scale) between two '
                                  'candidates in the current graph.', unit='m', lo=0.001,
                                  hi=10.0)
-    keep_frames: int = _p(10, 'Case C: an unmatched predicted end-effector is kept at most '
+    keep_frames: int = _p(8, 'Case C: an unmatched predicted end-effector is kept at most '
                           'this many frames.', symbol='T', lo=0, hi=1000)
     confirm_hits: int = _p(3, 'Case C keeps only tracks that current candidates supported in '
                            'at least this many frames (1: every track).', lo=1, hi=1000)
-    memory_sigma: float = _p(0.8, 'Geodesic memory penalty, α = σ^k (Eqs. 8-9).', symbol='σ',
+    memory_sigma: float = _p(0.9, 'Geodesic memory penalty, α = σ^k (Eqs. 8-9).', symbol='σ',
                              lo=0.0, hi=1.0)
     duplicate_distance: float = _p(0.05, 'A predicted end-effector closer than this to a '
                                    'detected (or longer-memory) one is dropped as a duplicate.',

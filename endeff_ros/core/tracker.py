@@ -44,8 +44,8 @@ from scipy.optimize import linear_sum_assignment
 from .bands import UNREACHED
 from .cloud import FloorPlane
 from .flow import FlowEstimator, propagate_points
-from .nearest import nearest_point
 from .graph import approximate_geodesic, path_to_sources
+from .nearest import nearest_point
 from .params import EndeffParams
 from .single_frame import FrameEstimate, estimate_frame
 from .types import Candidate, RGBDFrame, Track
@@ -297,6 +297,11 @@ class Tracker:
                 else:
                     # The memorised end-effector wins (Fig. 7b); the candidate is dropped.
                     self._take_prediction(track, pr, pred_geo, missed=False)
+                    if np.linalg.norm(cand.position - pr.position) < p.similarity_scale:
+                        # ... unless it is where the prediction is: then it is this
+                        # end-effector seen again (a hand leaving the body, its geodesic
+                        # distance still short), and the track takes its position.
+                        self._reacquire(track, cand)
                 survivors.append(track)
             else:
                 if pr.node < 0:
@@ -369,6 +374,15 @@ class Tracker:
         track.missed = track.missed + 1 if missed else 0
         track.age += 1
         track.detected = False
+
+    @staticmethod
+    def _reacquire(track: _TrackState, cand: Candidate) -> None:
+        """A case-B track whose memory won keeps it, but takes the position of a candidate
+        lying where it was predicted."""
+        track.position = cand.position
+        track.path = cand.path
+        track.hits += 1
+        track.detected = True
 
     def _new_id(self) -> int:
         self._next_id += 1
