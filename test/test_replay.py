@@ -10,7 +10,15 @@ import pytest
 
 from endeff_ros.ros import convert
 from endeff_ros.ros.procs import profile_path, ros_env
-from endeff_ros.ros.replay import Output, RawMessage, cdr_stamp, jittered, latency_summary, restamp
+from endeff_ros.ros.replay import (
+    Output,
+    RawMessage,
+    cdr_stamp,
+    jittered,
+    latency_summary,
+    restamp,
+    unpaired_depth,
+)
 
 pytest.importorskip('sensor_msgs.msg')
 
@@ -60,6 +68,19 @@ def test_latency_summary_counts_drops():
     out = latency_summary(sent, outputs, sorted(sent))
     assert out['frames_sent'] == 10 and out['outputs'] == 8 and out['dropped_frames'] == 2
     assert out['latency_ms_max'] == 40.0 and 20.0 <= out['latency_ms_p50'] <= 25.0
+    assert out['unpaired_inputs'] == 0
+
+
+def test_frames_without_a_colour_partner_are_unpaired_not_dropped():
+    depth = [1_000, 2_000, 3_000, 4_000, 5_000]
+    color = [1_004, 2_010, 4_003, 5_002]  # none near 3_000; 2_010 is outside a 5 ns slop
+    assert unpaired_depth(depth, color, 5) == {2_000, 3_000}
+    assert unpaired_depth(depth, color, 10) == {3_000}
+    assert unpaired_depth(depth, [], 10) == set(depth)
+    sent = {s: s for s in depth}
+    outputs = {s: Output(s + 1_000_000, 'f', np.zeros(0)) for s in (1_000, 5_000)}
+    out = latency_summary(sent, outputs, depth, unpaired_depth(depth, color, 10))
+    assert out['outputs'] == 2 and out['unpaired_inputs'] == 1 and out['dropped_frames'] == 2
 
 
 def test_fastdds_profile_is_a_32mb_shm_plus_udp_default_profile():

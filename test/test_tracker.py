@@ -242,7 +242,7 @@ REACH = 0.4
 def test_unmatched_limb_kept_exactly_t_frames(keep):
     """Case C: a star limb disappears, its prediction still lands on the foreground (the
     ball); the track is kept as predicted for exactly T frames, then removed."""
-    shots = star_limb_vanishes(3, 7)
+    shots = star_limb_vanishes(5, 7)  # detected in 5 frames >= T: T is the bound
     r = run(shots, EndeffParams(keep_frames=keep, max_rectify_distance=REACH), single=False)
     gone = r.labels('gone')[0]
     track, d = r.nearest(gone - 1, sc.star_tip(5, 0))
@@ -255,6 +255,18 @@ def test_unmatched_limb_kept_exactly_t_frames(keep):
         assert r.track(i, tid) is None, (i, r.table(tid, 0))
     # The other four limbs keep their tracks throughout.
     assert all(len(r.results[i].tracks) == 4 for i in range(gone + keep, len(shots)))
+
+
+@pytest.mark.parametrize('seen', [3, 4])
+def test_unmatched_limb_kept_no_longer_than_it_was_seen(seen):
+    """Case C keeps a track at most T frames and at most as many frames as detections
+    supported it: a limb seen in 3 (4) frames survives 3 (4) unmatched frames with T = 6."""
+    shots = star_limb_vanishes(seen, 9)
+    r = run(shots, EndeffParams(keep_frames=6, max_rectify_distance=REACH), single=False)
+    gone = r.labels('gone')[0]
+    tid = r.nearest(gone - 1, sc.star_tip(5, 0))[0].id
+    kept = [i for i in range(gone, len(shots)) if r.track(i, tid) is not None]
+    assert kept == list(range(gone, gone + seen)), r.table(tid, 0)
 
 
 HAND_T4 = pytest.mark.xfail(strict=True, reason=(
@@ -343,7 +355,7 @@ def test_still_person_keeps_every_id():
 
 def test_track_state_age_confidence():
     keep = 4
-    r = run(star_limb_vanishes(3, 7), EndeffParams(keep_frames=keep, max_rectify_distance=REACH),
+    r = run(star_limb_vanishes(5, 7), EndeffParams(keep_frames=keep, max_rectify_distance=REACH),
             single=False)
     people = run(hand_to_side(3, 8), EndeffParams(keep_frames=keep), single=False)
     for rr in (r, people):

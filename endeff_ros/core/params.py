@@ -103,7 +103,8 @@ class EndeffParams:
                                  'candidates in the current graph.', unit='m', lo=0.001,
                                  hi=10.0)
     keep_frames: int = _p(8, 'Case C: an unmatched predicted end-effector is kept at most '
-                          'this many frames.', symbol='T', lo=0, hi=1000)
+                          'this many frames, and no more frames than it was detected in.',
+                          symbol='T', lo=0, hi=1000)
     confirm_hits: int = _p(3, 'Case C keeps only tracks that current candidates supported in '
                            'at least this many frames (1: every track).', lo=1, hi=1000)
     memory_sigma: float = _p(0.9, 'Geodesic memory penalty, α = σ^k (Eqs. 8-9).', symbol='σ',

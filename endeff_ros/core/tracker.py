@@ -306,8 +306,10 @@ class Tracker:
             else:
                 if pr.node < 0:
                     continue  # farther than max_rectify_distance: it left the foreground
-                if track.missed + 1 > p.keep_frames:
-                    continue  # case C for more than T frames: removed
+                if track.missed + 1 > min(p.keep_frames, track.hits):
+                    # Case C for more than T frames (or for longer than detections ever
+                    # supported it: a few spurious detections die as fast as they came).
+                    continue
                 if track.hits < p.confirm_hits:
                     continue  # never confirmed: a one-off candidate is not kept alive
                 self._take_prediction(track, pr, pred_geo, missed=True)

@@ -3,8 +3,12 @@
 A synthetic (or any benchmark) bag is replayed at a fixed rate (30 Hz by default, open loop, as
 a live camera would send it) to ``endeff_node`` and to :mod:`endeff_ros.ros.relay`, each in its
 own process with the Fast DDS SHM profile. Latency is measured from the publication of each
-depth image to the receipt of the output stamped with it (same clock, the driver process);
-frames without an output are counted as dropped (the node skips frames it is too slow for).
+depth image to the receipt of the output stamped with it (same clock, the driver process).
+A frame without an output is ``dropped`` (the node skips frames it is too slow for), unless
+its depth image had no colour image within the node's ``sync_slop`` in the bag: those are
+``unpaired_inputs`` (the synthetic bags drop a few colour images on purpose; the
+approximate-time synchroniser cannot complete such a set, and the node only processes a depth
+image alone once colour has been missing for ``color_timeout``).
 
     python -m endeff_ros.ros.latency_bench [--bag BAG] [--rate 30] [--loops 3] [--no-profile]
 

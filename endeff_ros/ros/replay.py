@@ -246,6 +246,7 @@ class ReplayStats:
     """What a replay sent and how long it took."""
 
     depth_sent: list[int] = field(default_factory=list)
+    color_sent: list[int] = field(default_factory=list)
     messages: int = 0
     waited_out: int = 0  # lock-step: outputs that never came within the timeout
     seconds: float = 0.0
@@ -290,18 +291,41 @@ def replay(executor: Any, source: BagSource, replayer: Replayer, *,
         stats.messages += 1
         if msg.kind == 'depth':
             stats.depth_sent.append(msg.stamp_ns)
+        elif msg.kind == 'color':
+            stats.color_sent.append(msg.stamp_ns)
         executor.spin_once(timeout_sec=0)
     stats.seconds = time.monotonic() - t_start
     return stats
 
 
+def unpaired_depth(depth_stamps: list[int], color_stamps: list[int],
+                   slop_ns: int) -> set[int]:
+    """Depth stamps with no colour stamp within ``slop_ns``: frames the approximate-time
+    synchroniser cannot complete (the synthetic bags drop some colour images on purpose)."""
+    color = np.sort(np.asarray(color_stamps, dtype=np.int64))
+    depth = np.asarray(depth_stamps, dtype=np.int64)
+    if color.size == 0:
+        return {int(s) for s in depth}
+    i = np.searchsorted(color, depth)
+    before, after = color[np.maximum(i - 1, 0)], color[np.minimum(i, color.size - 1)]
+    gap = np.minimum(np.abs(depth - before), np.abs(depth - after))
+    return {int(s) for s in depth[gap > slop_ns]}
+
+
 def latency_summary(sent: dict[int, int], outputs: dict[int, Output],
-                    stamps: list[int]) -> dict[str, Any]:
-    """Delivered count, dropped frames and end-to-end latency percentiles (ms) of one output."""
+                    stamps: list[int], unpaired: set[int] = frozenset()) -> dict[str, Any]:
+    """Delivered count, dropped frames and end-to-end latency percentiles (ms) of one output.
+
+    Frames in ``unpaired`` (inputs that cannot be synchronised) without an output are counted
+    as ``unpaired_inputs``, not as ``dropped_frames``.
+    """
     lat = np.array([(outputs[s].receipt_ns - sent[s]) / 1e6 for s in stamps if s in outputs],
                    dtype=np.float64)
+    missing = [s for s in stamps if s not in outputs]
+    lost_unpaired = sum(s in unpaired for s in missing)
     out: dict[str, Any] = {'frames_sent': len(stamps), 'outputs': int(lat.size),
-                           'dropped_frames': len(stamps) - int(lat.size)}
+                           'dropped_frames': len(missing) - lost_unpaired,
+                           'unpaired_inputs': lost_unpaired}
     if lat.size:
         p50, p95, p99 = np.percentile(lat, [50, 95, 99])
         out.update(latency_ms_p50=round(float(p50), 3), latency_ms_p95=round(float(p95), 3),

@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from endeff_ros.ros.processing import NODE_PARAMS
 from endeff_ros.ros.procs import ros_env, start, stop
 
 
@@ -35,6 +36,9 @@ def _node_args(namespace: str, params: dict[str, Any]) -> list[str]:
         text = str(value).lower() if isinstance(value, bool) else str(value)
         args += ['-p', f'{key}:={text}']
     return args
+
+
+_DEFAULT_SLOP_S = next(r['default'] for r in NODE_PARAMS if r['name'] == 'sync_slop')
 
 
 def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = False,
@@ -66,7 +70,8 @@ def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = 
                                    stdout=logs['relay'], stderr=subprocess.STDOUT))
             driver = ['-m', 'endeff_ros.ros.session', '--bag', str(bag), '--out', str(out),
                       '--namespace', namespace, '--jitter', str(jitter_s),
-                      '--frame-timeout', str(frame_timeout_s)]
+                      '--frame-timeout', str(frame_timeout_s),
+                      '--sync-slop', str((node_params or {}).get('sync_slop', _DEFAULT_SLOP_S))]
             if rate_hz is not None:
                 driver += ['--rate', str(rate_hz)]
             if relay:
@@ -122,6 +127,7 @@ def _driver(args: argparse.Namespace) -> int:
         replay,
         spin_for,
         spin_until,
+        unpaired_depth,
     )
 
     rclpy.init()
@@ -169,7 +175,9 @@ def _driver(args: argparse.Namespace) -> int:
             **{f: o.points[f].tolist() for f in ('x', 'y', 'z', 'id', 'state')
                if f in (o.points.dtype.names or ())}}
             for s, o in clouds.items()} for name, clouds in collector.clouds.items()}
-        record['latency'] = {name: latency_summary(replayer.sent, collector.clouds[name], sent)
+        unpaired = unpaired_depth(sent, stats.color_sent, round(args.sync_slop * 1e9))
+        record['latency'] = {name: latency_summary(replayer.sent, collector.clouds[name], sent,
+                                                   unpaired if name == 'node' else set())
                              for name in topics}
         record['markers'] = {str(s): [[m.id, m.pose.position.x, m.pose.position.y,
                                        m.pose.position.z] for m in arr.markers
@@ -192,6 +200,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--frame-timeout', type=float, default=20.0)
     parser.add_argument('--max-frames', type=int, default=None)
     parser.add_argument('--loops', type=int, default=1)
+    parser.add_argument('--sync-slop', type=float, default=_DEFAULT_SLOP_S,
+                        help="the node's sync_slop: depth images without colour this close "
+                             'are unpaired inputs, not drops')
     args = parser.parse_args(argv)
     t0 = time.monotonic()
     try:
