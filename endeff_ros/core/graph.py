@@ -118,9 +118,12 @@ def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
     dense[rows, cols] = dense[cols, rows] = w
     # Both directions as a sparse matrix, searched as a directed graph: 3x cheaper than
     # handing csgraph the dense matrix (which it converts) or asking it to symmetrise.
-    both = sparse.csr_matrix((np.concatenate([w, w]), (np.concatenate([rows, cols]),
-                                                        np.concatenate([cols, rows]))),
-                             shape=(k, k))
+    src, dst = np.concatenate([rows, cols]), np.concatenate([cols, rows])
+    order = np.argsort(src, kind='stable')
+    indptr = np.zeros(k + 1, dtype=np.int32)
+    np.cumsum(np.bincount(src, minlength=k), out=indptr[1:])
+    both = sparse.csr_matrix((np.concatenate([w, w])[order], dst[order].astype(np.int32),
+                              indptr), shape=(k, k))
     dist, pred = csgraph.dijkstra(both, directed=True, return_predecessors=True)
     return TopologyGraph(centroids, sizes, node_band, dense, dist, pred)
 
@@ -141,9 +144,18 @@ def _join_pieces(attached: npt.NDArray[np.bool_], centroids: npt.NDArray[np.floa
     k = len(attached)
     if k < 2:
         return
-    n_pieces, piece = csgraph.connected_components(sparse.csr_matrix(attached), directed=False)
-    if n_pieces < 2:
-        return
+    parent = list(range(k))  # union-find over sub-bands (a few hundred at most)
+
+    def find(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    rows, cols = np.nonzero(np.triu(attached, k=1))
+    for r, c in zip(rows.tolist(), cols.tolist()):
+        parent[find(r)] = find(c)
+    piece = np.array([find(x) for x in range(k)])
     ok = (si != UNREACHED) & (sj != UNREACHED)
     a, b = si[ok], sj[ok]
     cross = piece[a] != piece[b]
@@ -152,16 +164,8 @@ def _join_pieces(attached: npt.NDArray[np.bool_], centroids: npt.NDArray[np.floa
     links = np.unique(np.minimum(a[cross], b[cross]) * k + np.maximum(a[cross], b[cross]))
     a, b = links // k, links % k
     length = np.linalg.norm(centroids[a] - centroids[b], axis=1)
-    parent = np.arange(n_pieces)
-
-    def find(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
     for m in np.argsort(length, kind='stable'):  # few links: one per piece boundary
-        ra, rb = find(int(piece[a[m]])), find(int(piece[b[m]]))
+        ra, rb = find(int(a[m])), find(int(b[m]))
         if ra != rb:
             parent[ra] = rb
             attached[a[m], b[m]] = attached[b[m], a[m]] = True
