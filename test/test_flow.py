@@ -160,6 +160,28 @@ def test_propagate_points_with_a_flow_region_equals_the_full_flow_there() -> Non
         propagate_points(points, flow[v0:v1, u0:u1], d0, d1, K, flow_origin=(u0, 400))
 
 
+def test_propagate_points_reads_a_flow_field_at_working_resolution() -> None:
+    """``FlowEstimator.flow(..., upsample=False)`` read with ``flow_scale`` predicts what the
+    upsampled field predicts (within a few mm), for the whole image and for a region."""
+    z0 = 2.0
+    prev, cur = _shifted_pair(8.0, -5.0, seed=4)
+    est = FlowEstimator()
+    full = est.flow(prev, cur)
+    small = est.flow(prev, cur, upsample=False)
+    assert small.shape == (240, 320, 2)
+    points = np.array([[0.0, 0.0, z0], [0.1, 0.05, z0], [-0.3, 0.2, z0]])
+    d0 = _depth(z0)
+    want, _ = propagate_points(points, full, d0, d0, K)
+    got, reliable = propagate_points(points, small, d0, d0, K, flow_origin=(0, 0),
+                                     flow_scale=(0.5, 0.5))
+    assert reliable.all()
+    np.testing.assert_allclose(got, want, atol=0.005)
+    roi = est.flow(prev[100:400, 150:550], cur[100:400, 150:550], upsample=False)
+    got, _ = propagate_points(points[:2], roi, d0, d0, K, flow_origin=(150, 100),
+                              flow_scale=(roi.shape[1] / 400, roi.shape[0] / 300))
+    np.testing.assert_allclose(got, want[:2], atol=0.005)
+
+
 def test_propagate_points_takes_the_motion_of_its_own_surface() -> None:
     """A finger (3 px wide bar at 1.5 m, moving 10 px right) over a torso (2.5 m, static): most
     of a 7x7 window around a point on the finger sees the torso, yet the point must take the

@@ -130,13 +130,16 @@ class FlowEstimator:
         msg = f'{name} must be (H, W, 3) RGB or (H, W) grayscale, got shape {image.shape}'
         raise InputError(msg)
 
-    def flow(self, prev_rgb: npt.NDArray[np.uint8],
-             cur_rgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
+    def flow(self, prev_rgb: npt.NDArray[np.uint8], cur_rgb: npt.NDArray[np.uint8], *,
+             upsample: bool = True) -> npt.NDArray[np.float32]:
         """Forward flow from ``prev_rgb`` (frame t) to ``cur_rgb`` (frame t+1).
 
         Both images are (H, W, 3) uint8 RGB (or (H, W) grayscale) of the same size. Returns
         (H, W, 2) float32: the displacement (du, dv) in full-resolution pixels of every pixel
-        of the previous frame, so that ``prev[v, u] ~ cur[v + dv, u + du]``.
+        of the previous frame, so that ``prev[v, u] ~ cur[v + dv, u + du]``. With
+        ``upsample=False`` the field stays at the working resolution (``scale`` times the
+        size; vectors still in full-resolution pixels): :func:`propagate_points` reads it
+        with ``flow_scale``, which saves the upsampling.
         """
         prev = self._gray(prev_rgb, 'previous colour image')
         cur = self._gray(cur_rgb, 'current colour image')
@@ -163,6 +166,8 @@ class FlowEstimator:
         # bilinear upsampling is linear, so the order does not matter).
         small[:, :, 0] *= np.float32(w / sw)
         small[:, :, 1] *= np.float32(h / sh)
+        if not upsample:
+            return small
         return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
 
 
@@ -230,6 +235,7 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
                      prev_depth: npt.NDArray[np.float32], cur_depth: npt.NDArray[np.float32],
                      intrinsics: Intrinsics, *, window: int = 7, depth_tolerance: float = 0.1,
                      flow_origin: tuple[int, int] | None = None,
+                     flow_scale: tuple[float, float] = (1.0, 1.0),
                      ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
     """Move 3D points of frame t to frame t+1 with optical flow and depth (3D scene flow).
 
@@ -254,6 +260,11 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
         ``None``: ``flow`` covers the image. ``(u0, v0)``: ``flow`` covers only a region of
         interest (any size inside the image, possibly empty) whose top-left pixel is
         (u0, v0); pixels outside it have no flow.
+    flow_scale:
+        ``(sx, sy)``: ``flow`` is sampled at this fraction of the image resolution (a field
+        from ``FlowEstimator.flow(..., upsample=False)``): pixel (u, v) reads
+        ``flow[floor((v - v0) * sy), floor((u - u0) * sx)]``. The region then covers
+        ``flow.shape / scale`` pixels.
 
     Returns
     -------
@@ -295,7 +306,8 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
     else:
         flow, (u0, v0) = np.asarray(flow), flow_origin
         if not (flow.ndim == 3 and flow.shape[2] == 2 and 0 <= u0 and 0 <= v0
-                and u0 + flow.shape[1] <= w and v0 + flow.shape[0] <= h):
+                and u0 + flow.shape[1] / flow_scale[0] <= w + 1
+                and v0 + flow.shape[0] / flow_scale[1] <= h + 1):
             msg = (f'flow region of shape {flow.shape} at (u, v) = ({u0}, {v0}) does not fit '
                    f'the {w}x{h} image of the camera info')
             raise InputError(msg)
@@ -320,7 +332,7 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
         """Median flow (du, dv), neighbourhood Δz and enough-valid flag of points ``sel``."""
         dr, dc = _offsets(win)
         rows, cols = vr[sel, None] + dr, ur[sel, None] + dc
-        f = _gather(flow, rows - v0, cols - u0)
+        f = _gather(flow, (rows - v0) * flow_scale[1], (cols - u0) * flow_scale[0])
         d0 = _gather(prev_depth, rows, cols)
         with np.errstate(invalid='ignore'):
             ok = (np.isfinite(f).all(axis=2) & (d0 > 0)

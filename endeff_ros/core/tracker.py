@@ -168,23 +168,24 @@ class Tracker:
         if (len(positions) == 0 or prev is None or prev.color is None or frame.color is None
                 or prev.depth.shape != frame.depth.shape):
             return positions
-        flow, origin = self._roi_flow(prev, frame, positions)
+        flow, origin, scale = self._roi_flow(prev, frame, positions)
         moved, _ = propagate_points(positions, flow, prev.depth, frame.depth, frame.intrinsics,
-                                    flow_origin=origin)
+                                    flow_origin=origin, flow_scale=scale)
         return moved
 
     def _roi_flow(self, prev: RGBDFrame, frame: RGBDFrame, anchors: npt.NDArray[np.float64],
-                  ) -> tuple[npt.NDArray[np.float32], tuple[int, int]]:
+                  ) -> tuple[npt.NDArray[np.float32], tuple[int, int], tuple[float, float]]:
         """Dense flow where it is needed: inside the box around the tracked anchors (with a
-        margin for the window reads and the motion); returns the flow of that region and its
-        top-left pixel (u0, v0). Elsewhere there is no flow (``propagate_points`` then falls
-        back as for missing flow). A person fills a fraction of a 640x480 frame, so this is
-        several times cheaper than the whole image and gives the same vectors there."""
+        margin for the window reads and the motion); returns the flow of that region at the
+        estimator's working resolution, its top-left pixel (u0, v0) and its scale (sx, sy).
+        Elsewhere there is no flow (``propagate_points`` then falls back as for missing
+        flow). A person fills a fraction of a 640x480 frame, so this is several times cheaper
+        than the whole image and gives the same vectors there."""
         k = frame.intrinsics
         h, w = frame.depth.shape
         uv = k.project(anchors[anchors[:, 2] > 1e-6]) if len(anchors) else np.zeros((0, 2))
         uv = uv[np.all(np.isfinite(uv), axis=1)]
-        none = np.zeros((0, 0, 2), dtype=np.float32), (0, 0)
+        none = np.zeros((0, 0, 2), dtype=np.float32), (0, 0), (1.0, 1.0)
         if len(uv) == 0:
             return none
         margin = ROI_MARGIN_PX
@@ -193,8 +194,10 @@ class Tracker:
         u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, w), min(v1, h)
         if u1 - u0 < 16 or v1 - v0 < 16:
             return none
-        return self._flow_estimator().flow(prev.color[v0:v1, u0:u1],
-                                           frame.color[v0:v1, u0:u1]), (int(u0), int(v0))
+        flow = self._flow_estimator().flow(prev.color[v0:v1, u0:u1],
+                                           frame.color[v0:v1, u0:u1], upsample=False)
+        scale = (flow.shape[1] / (u1 - u0), flow.shape[0] / (v1 - v0))
+        return flow, (int(u0), int(v0)), scale
 
     # -- update (Section 5.2) ----------------------------------------------------------------
 
