@@ -140,25 +140,28 @@ def expand_bands(graph: Neighbours, dense: npt.NDArray[np.bool_],
     band = np.full(n, UNREACHED, dtype=np.intp)
     seeds = np.asarray(seeds, dtype=np.intp)
     band[seeds] = 0
-    phi = np.full(n, np.inf)
-    mark = np.zeros(n, dtype=bool)
+    mark = np.zeros(n, dtype=bool)  # scratch: the new band
+    close = np.zeros(n, dtype=bool)  # scratch: new points closer than ¾δ_L to the contour
+    all_dense = bool(dense.all())
     curve = seeds
     rim = 0.75 * delta
     k = 0
     indptr, indices, data = graph.indptr, graph.indices, graph.data
     while max_bands is None or k < max_bands:
-        new = np.zeros(0, dtype=np.intp)
+        new = near = np.zeros(0, dtype=np.intp)
         if curve.size:
             # Neighbours of the contour (Eq. 2 restricted to distances < δ_L).
-            starts, ends = indptr[curve], indptr[curve + 1]
-            lengths = ends - starts
-            total = int(lengths.sum())
+            starts = indptr[curve]
+            lengths = indptr[curve + 1] - starts
             offsets = (np.repeat(starts - np.cumsum(lengths) + lengths, lengths)
-                       + np.arange(total))
-            cols, dist = indices[offsets], data[offsets]
-            ok = (band[cols] == UNREACHED) & dense[cols]
-            cols, dist = cols[ok], dist[ok]
-            np.minimum.at(phi, cols, dist)  # φ(x, t): distance to curve(t)
+                       + np.arange(int(lengths.sum())))
+            cols = indices[offsets]
+            ok = band[cols] == UNREACHED
+            if not all_dense:
+                ok &= dense[cols]
+            cols = cols[ok]
+            # φ(x, t) < ¾δ_L for these: not on the next contour (Eq. 4).
+            near = cols[data[offsets[ok]] < rim]
             mark[cols] = True
             new = np.flatnonzero(mark)
             mark[new] = False
@@ -174,9 +177,10 @@ def expand_bands(graph: Neighbours, dense: npt.NDArray[np.bool_],
             continue
         k += 1
         band[new] = k  # Eq. 1: L_{t+1}, and L^0_{t+1} = L^0_t ∪ L_{t+1}
-        outer = new[phi[new] >= rim]  # Eq. 4: the next contour
+        close[near] = True
+        outer = new[~close[new]]  # Eq. 4: the next contour, φ in [¾δ_L, δ_L)
+        close[near] = False
         curve = outer if outer.size else new
-        phi[new] = np.inf
     return band
 
 

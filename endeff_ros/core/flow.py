@@ -124,7 +124,7 @@ class FlowEstimator:
         if image.ndim == 2:
             return np.ascontiguousarray(image)
         if image.ndim == 3 and image.shape[2] == 3:
-            return cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY)
+            return cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)  # OpenCV reads crops in place
         if image.ndim == 3 and image.shape[2] == 1:
             return np.ascontiguousarray(image[:, :, 0])
         msg = f'{name} must be (H, W, 3) RGB or (H, W) grayscale, got shape {image.shape}'
