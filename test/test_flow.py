@@ -180,6 +180,9 @@ def test_propagate_points_reads_a_flow_field_at_working_resolution() -> None:
     got, _ = propagate_points(points[:2], roi, d0, d0, K, flow_origin=(150, 100),
                               flow_scale=(roi.shape[1] / 400, roi.shape[0] / 300))
     np.testing.assert_allclose(got, want[:2], atol=0.005)
+    for bad in ((0.0, 0.5), (0.5, 2.0), (0.5,), (-1.0, -1.0)):
+        with pytest.raises(InputError, match='flow_scale'):
+            propagate_points(points, small, d0, d0, K, flow_origin=(0, 0), flow_scale=bad)
 
 
 def test_propagate_points_takes_the_motion_of_its_own_surface() -> None:

@@ -301,6 +301,9 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
         msg = f'depth_tolerance must be a positive number of metres, got {depth_tolerance!r}'
         raise InputError(msg)
     h, w = intrinsics.height, intrinsics.width
+    if not (len(flow_scale) == 2 and all(0.0 < float(f) <= 1.0 for f in flow_scale)):
+        msg = f'flow_scale must be two factors in (0, 1], got {flow_scale!r}'
+        raise InputError(msg)
     if flow_origin is None:
         flow, u0, v0 = _check_image('flow', flow, (h, w, 2)), 0, 0
     else:
