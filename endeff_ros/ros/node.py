@@ -268,11 +268,14 @@ class EndeffNode(Node):
             self.get_logger().warning(text, throttle_duration_sec=5)
             result = SimpleNamespace(tracks=[], estimate=None)
         self.pub_cloud.publish(convert.tracks_to_cloud(header, result.tracks))
-        self.pub_markers.publish(
-            convert.result_to_markers(header, result, self._p('marker_lifetime')))
-        if result.estimate is not None and self._p('publish_debug_bands'):
+        # Markers and debug outputs are built only for subscribers (about 2 ms a frame).
+        if self.pub_markers.get_subscription_count():
+            self.pub_markers.publish(
+                convert.result_to_markers(header, result, self._p('marker_lifetime')))
+        if (result.estimate is not None and self._p('publish_debug_bands')
+                and self.pub_bands.get_subscription_count()):
             self.pub_bands.publish(convert.bands_to_cloud(header, result.estimate))
-        if self._p('publish_debug_image'):
+        if self._p('publish_debug_image') and self.pub_image.get_subscription_count():
             base = frame.color if frame.color is not None else convert.depth_to_rgb(frame.depth)
             image = convert.draw_tracks(base, frame.intrinsics, result.tracks)
             self.pub_image.publish(convert.array_to_image_msg(header, image))
