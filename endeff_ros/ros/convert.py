@@ -122,8 +122,11 @@ def depth_image_to_array(msg: Any) -> npt.NDArray[np.float32]:
     depth = pixels.astype(np.float32)
     if scale != 1.0:
         depth *= np.float32(scale)
-    with np.errstate(invalid='ignore'):
-        depth[~(depth > 0) | ~np.isfinite(depth)] = np.nan
+    if np.issubdtype(pixels.dtype, np.integer):
+        depth[pixels == 0] = np.nan  # integer millimetres: 0 is the only non-reading
+    else:
+        with np.errstate(invalid='ignore'):
+            depth[~(depth > 0) | ~np.isfinite(depth)] = np.nan
     return depth
 
 
