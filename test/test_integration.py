@@ -115,3 +115,27 @@ def test_process_output_equals_node_output(bag, record, tmp_path):
         for f in ('x', 'y', 'z'):
             np.testing.assert_allclose(np.asarray(node[f])[order_n], arr[f][order_o], atol=1e-5)
         assert np.asarray(node['state'])[order_n].tolist() == arr['state'][order_o].tolist()
+
+
+def test_latency_bench_accounts_for_every_frame(bag):
+    """The latency benchmark (node and relay over DDS, open loop): every depth image sent
+    has an output, or is counted as dropped by the node, or as an unpaired input (the bag
+    drops a colour image on purpose); latencies are positive; markers unsubscribed."""
+    from endeff_ros.ros.latency_bench import ros_latency_bench
+    from endeff_ros.ros.replay import BagSource, cdr_stamp, unpaired_depth
+
+    result = ros_latency_bench(bag, rate_hz=15.0, loops=1)
+    node, relay = result['node'], result['relay']
+    with BagSource(bag) as source:
+        stamps = {kind: sorted(cdr_stamp(raw) for _, raw in source._raw([source.topics[kind]]))
+                  for kind in ('color', 'depth')}
+    unpaired = unpaired_depth(stamps['depth'], stamps['color'], round(0.015e9))
+    assert len(unpaired) == 1  # premise: the quick bag lacks one colour image
+    assert node['frames_sent'] == relay['frames_sent'] == len(stamps['depth'])
+    assert node['outputs'] + node['dropped_frames'] + node['unpaired_inputs'] == \
+        node['frames_sent']
+    assert node['unpaired_inputs'] <= 1 and node['outputs'] >= node['frames_sent'] - 4
+    assert relay['unpaired_inputs'] == 0 and relay['outputs'] == relay['frames_sent']
+    assert 0 < node['latency_ms_p50'] <= node['latency_ms_p95'] <= node['latency_ms_max']
+    assert result['markers_subscribed'] is False
+    assert int(result['node_diagnostics']['processed']) == node['outputs']

@@ -42,6 +42,7 @@ def _default_bag(tmp: Path) -> Path:
 
 
 def ros_latency_bench(bag: str | Path | None = None, *, rate_hz: float = 30.0,
+                      markers: bool = False,
                       loops: int = 3, profile: bool = True,
                       max_frames: int | None = None,
                       node_params: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -49,7 +50,8 @@ def ros_latency_bench(bag: str | Path | None = None, *, rate_hz: float = 30.0,
 
     Returns ``{'bag', 'rate_hz', 'fastdds_profile', 'node': {...}, 'relay': {...},
     'node_diagnostics': {...}}`` where node and relay hold ``frames_sent``, ``outputs``,
-    ``dropped_frames`` and ``latency_ms_p50/p95/p99/max``.
+    ``dropped_frames`` and ``latency_ms_p50/p95/p99/max``. ``markers``: also subscribe to
+    ``end_effectors/markers`` (as RViz would), which makes the node build them.
     """
     from endeff_ros.ros.session import run_session
 
@@ -57,13 +59,14 @@ def ros_latency_bench(bag: str | Path | None = None, *, rate_hz: float = 30.0,
         path = Path(bag) if bag is not None else _default_bag(Path(tmp))
         record = run_session(path, rate_hz=rate_hz, relay=True, profile=profile,
                              max_frames=max_frames, loops=loops, frame_timeout_s=5.0,
-                             node_params=node_params)
+                             node_params=node_params, markers=markers)
     diag = record.get('diagnostics', {})
     keys = ('processed', 'skipped', 'colorless', 'dropped_unpaired.color',
             'dropped_unpaired.depth', 'processing_ms.p50', 'processing_ms.p95',
             'processing_ms.p99')
     return {'bag': str(path), 'rate_hz': rate_hz, 'loops': loops,
-            'fastdds_profile': profile, 'node': record['latency']['node'],
+            'fastdds_profile': profile, 'markers_subscribed': markers,
+            'node': record['latency']['node'],
             'relay': record['latency']['relay'],
             'node_diagnostics': {k: diag[k] for k in keys if k in diag}}
 
@@ -97,12 +100,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--no-profile', action='store_true',
                         help='run without the Fast DDS SHM profile (for comparison)')
     parser.add_argument('--json', help='also write the result to this file')
+    parser.add_argument('--markers', action='store_true',
+                        help='also subscribe to the markers, as RViz would (the node builds '
+                             'them only for subscribers)')
     parser.add_argument('--params', metavar='YAML', help='node parameter file (e.g. the fast '
                         'preset config/endeff_fast.yaml)')
     args = parser.parse_args(argv)
     params = load_params_option(args.params, 'latency_bench')
     result = ros_latency_bench(args.bag, rate_hz=args.rate, loops=args.loops,
                                profile=not args.no_profile, max_frames=args.max_frames,
+                               markers=args.markers,
                                node_params=params.to_dict() if params else None)
     print_json(result, args.json)
     return 0

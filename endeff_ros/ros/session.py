@@ -42,6 +42,7 @@ _DEFAULT_SLOP_S = next(r['default'] for r in NODE_PARAMS if r['name'] == 'sync_s
 
 
 def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = False,
+                markers: bool = True,
                 profile: bool = True, node_params: dict[str, Any] | None = None,
                 namespace: str = '/camera', domain_id: int | None = None,
                 max_frames: int | None = None, loops: int = 1, jitter_s: float = 0.008,
@@ -50,6 +51,8 @@ def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = 
 
     ``rate_hz=None`` replays in lock-step (every frame processed); otherwise at that rate.
     ``loops`` replays the bag that many times (re-stamped, see :meth:`BagSource.looped`).
+    ``markers=False``: nobody subscribes to ``end_effectors/markers`` (the node then does not
+    build them), as for a consumer of ``end_effectors`` alone.
     Every child process is stopped (SIGINT, then harder) before returning.
     """
     if domain_id is None:
@@ -76,6 +79,8 @@ def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = 
                 driver += ['--rate', str(rate_hz)]
             if relay:
                 driver += ['--relay']
+            if not markers:
+                driver += ['--no-markers']
             if max_frames is not None:
                 driver += ['--max-frames', str(max_frames)]
             if loops > 1:
@@ -150,7 +155,8 @@ def _driver(args: argparse.Namespace) -> int:
     record: dict[str, Any] = {'bag': str(args.bag)}
     with BagSource(args.bag) as source:
         replayer = Replayer(node, ns)
-        collector = Collector(node, topics, markers_topic=f'{ns}/end_effectors/markers')
+        collector = Collector(node, topics, markers_topic=None if args.no_markers
+                              else f'{ns}/end_effectors/markers')
         if not spin_until(executor, lambda: replayer.matched(1 + args.relay) and
                           collector.matched(), 90.0):
             print('endeff_node (or the relay) never appeared on DDS', file=sys.stderr)
@@ -196,6 +202,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--namespace', default='/camera')
     parser.add_argument('--rate', type=float, default=None)
     parser.add_argument('--relay', action='store_true')
+    parser.add_argument('--no-markers', action='store_true',
+                        help='do not subscribe to the markers (the node then skips them)')
     parser.add_argument('--jitter', type=float, default=0.008)
     parser.add_argument('--frame-timeout', type=float, default=20.0)
     parser.add_argument('--max-frames', type=int, default=None)
