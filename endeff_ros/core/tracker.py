@@ -122,10 +122,17 @@ class Tracker:
             self._flow = FlowEstimator(self.params.flow_method)
         return self._flow
 
-    def update(self, frame: RGBDFrame) -> TrackerResult:
-        """Process one frame and return the current end-effectors."""
-        p = self.params
-        estimate = estimate_frame(frame, p, floor=self._floor)
+    def estimate(self, frame: RGBDFrame) -> FrameEstimate:
+        """Sections 3-4 of ``frame`` with this tracker's floor: the first step of
+        :meth:`update`, which a caller may run early (depth needs no colour) and pass on."""
+        return estimate_frame(frame, self.params, floor=self._floor)
+
+    def update(self, frame: RGBDFrame, estimate: FrameEstimate | None = None) -> TrackerResult:
+        """Process one frame and return the current end-effectors. ``estimate``: what
+        :meth:`estimate` returned for this frame's depth, if it ran since the last update
+        (with the same parameters); computed here otherwise."""
+        if estimate is None:
+            estimate = self.estimate(frame)
         self._floor = estimate.floor
         stages = dict(estimate.stage_ms)
         t0 = time.perf_counter()

@@ -6,11 +6,14 @@ Subscribes (relative, remappable names) to ``color/image_raw``, ``depth/image_ra
 
 Latency never grows: subscription callbacks only synchronise and put the newest set into a
 one-item slot; a worker thread takes the newest set, runs the tracker and publishes. Sets the
-worker was too slow for are skipped and counted.
+worker was too slow for are skipped and counted. While a depth image waits for its colour
+partner, the worker already runs Sections 3-4 on it (they need no colour), so the colour
+image's delay and the depth processing overlap.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import threading
 import time
@@ -38,6 +41,7 @@ from endeff_ros.ros.processing import (
     LatestSlot,
     NodeStats,
     flatten,
+    take_first,
     updated_params,
     validate_node_changes,
 )
@@ -70,6 +74,10 @@ class EndeffNode(Node):
         self.stats = NodeStats()
         self._lock = threading.Lock()
         self._slot: LatestSlot[tuple[dict[str, Any], float]] = LatestSlot()
+        # Depth images (with the camera info) ready for the early Sections 3-4, and the result
+        # of the last one: (depth stamp, frame without colour, estimate, params, ms).
+        self._early: LatestSlot[tuple[Any, Any]] = self._slot.companion()
+        self._prepared: tuple[int, Any, Any, EndeffParams, float] | None = None
         self._inputs = ['color', 'depth', 'camera_info'] if self._p('use_color') else [
             'depth', 'camera_info']
         self._last_info: Any = None
@@ -145,6 +153,8 @@ class EndeffNode(Node):
                 self._first_unpaired_depth = receipt
             if kind == 'depth' and 'color' in self._inputs:
                 self._waiting[stamp] = (msg, receipt)
+                if self._last_info is not None:
+                    self._early.put((msg, self._last_info))
             ready = [self._claim(dict(zip(self._inputs, found)))
                      for found in self._sync.add(self._inputs.index(kind), stamp, msg)]
         for msgs in ready:
@@ -210,10 +220,12 @@ class EndeffNode(Node):
     def _run(self) -> None:
         next_diag = next_log = time.monotonic()
         while not self._slot.closed:
-            item = self._slot.take(timeout=0.02)
+            got = take_first([self._slot, self._early], timeout=0.02)
             try:
-                if item is not None:
-                    self._process(*item)
+                if got is not None and got[0] == 0:
+                    self._process(*got[1])
+                elif got is not None:
+                    self._prepare(*got[1])
                 now = time.monotonic()
                 self._flush_colorless(now)
                 self._check_camera_info(now)
@@ -238,6 +250,27 @@ class EndeffNode(Node):
             self.stats.warn('missing_camera_info', text)
             self.get_logger().warning(text, throttle_duration_sec=5)
 
+    def _prepare(self, depth: Any, info: Any) -> None:
+        """Sections 3-4 of a depth image whose colour partner has not arrived yet (the
+        tracker's :meth:`~endeff_ros.core.tracker.Tracker.estimate`); :meth:`_process` uses
+        the result if its set has that depth image and nothing changed in between."""
+        estimate_fn = getattr(self.tracker, 'estimate', None)
+        stamp = convert.stamp_to_ns(depth.header.stamp)
+        with self._lock:
+            if (estimate_fn is None or self._params_pending is not None or self._reset_pending
+                    or (self._floor_ns is not None and stamp <= self._floor_ns)):
+                return
+        t0 = time.perf_counter()
+        try:
+            frame = convert.frame_from_messages(None, depth, info)
+            if not np.isfinite(frame.depth).any():
+                return
+            estimate = estimate_fn(frame)
+        except InputError:
+            return  # _process reports it when the set comes
+        self._prepared = (stamp, frame, estimate, self.tracker.params,
+                          (time.perf_counter() - t0) * 1e3)
+
     def _process(self, msgs: dict[str, Any], receipt: float) -> None:
         with self._lock:
             if self._params_pending is not None:
@@ -246,11 +279,25 @@ class EndeffNode(Node):
                 self.tracker.reset()
                 self._reset_pending = False
                 self.stats.resets += 1
+                self._prepared = None
         depth = msgs['depth']
         header = depth.header
         t0 = time.perf_counter()
+        prepared, self._prepared = self._prepared, None
+        early_ms = 0.0
         try:
-            frame = convert.frame_from_messages(msgs.get('color'), depth, msgs['camera_info'])
+            if (prepared is not None and prepared[0] == convert.stamp_to_ns(header.stamp)
+                    and prepared[3] is self.tracker.params
+                    and msgs['camera_info'] is not None):
+                color = msgs.get('color')
+                frame = dataclasses.replace(prepared[1], color=None if color is None else
+                                            convert.color_image_to_array(color))
+                estimate, early_ms = prepared[2], prepared[4]
+                self.stats.prepared += 1
+            else:
+                frame = convert.frame_from_messages(msgs.get('color'), depth,
+                                                    msgs['camera_info'])
+                estimate = None
         except InputError as exc:
             self.stats.bad_input += 1
             text = f'skipping input frame: {exc}'
@@ -261,7 +308,8 @@ class EndeffNode(Node):
             if not np.isfinite(frame.depth).any():
                 msg = f'depth image {frame.stamp_ns} ns has no valid reading (all 0 or NaN)'
                 raise InputError(msg)
-            result = self.tracker.update(frame)
+            result = (self.tracker.update(frame) if estimate is None
+                      else self.tracker.update(frame, estimate=estimate))
         except InputError as exc:
             text = f'no end-effectors in frame (publishing an empty cloud): {exc}'
             self.stats.warn('empty_frame', text)
@@ -281,7 +329,7 @@ class EndeffNode(Node):
             self.pub_image.publish(convert.array_to_image_msg(header, image))
         self.stats.processed += 1
         self.stats.published_empty += not result.tracks
-        self.stats.processing_ms.add((time.perf_counter() - t0) * 1e3)
+        self.stats.processing_ms.add((time.perf_counter() - t0) * 1e3 + early_ms)
         self.stats.age_ms.add((time.monotonic() - receipt) * 1e3)
         now_ns = self.get_clock().now().nanoseconds
         self.stats.latency_ms.add((now_ns - frame.stamp_ns) / 1e6)
@@ -316,6 +364,7 @@ class EndeffNode(Node):
 
     def destroy_node(self) -> None:
         self._slot.close()
+        self._early.close()
         if self._worker.is_alive() and self._worker is not threading.current_thread():
             self._worker.join(timeout=5.0)
         super().destroy_node()

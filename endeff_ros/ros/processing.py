@@ -96,12 +96,16 @@ class LatestSlot(Generic[T]):
     worker ``take``\\ s the newest, and anything it was too slow for is dropped, never queued.
     """
 
-    def __init__(self) -> None:
-        self._cond = threading.Condition()
+    def __init__(self, cond: threading.Condition | None = None) -> None:
+        self._cond = cond or threading.Condition()  # slots may share one (take_first)
         self._item: T | None = None
         self._closed = False
         self.skipped = 0
         self.put_count = 0
+
+    def companion(self) -> LatestSlot[Any]:
+        """A new slot sharing this one's condition, so :func:`take_first` can wait on both."""
+        return LatestSlot(self._cond)
 
     def put(self, item: T) -> None:
         with self._cond:
@@ -133,6 +137,21 @@ class LatestSlot(Generic[T]):
         return self._closed
 
 
+def take_first(slots: list[LatestSlot[Any]], timeout: float | None = None,
+               ) -> tuple[int, Any] | None:
+    """``(index, item)`` of the first of ``slots`` (which share one condition) holding an
+    item, taking it; waits up to ``timeout`` s when all are empty; None if none / closed."""
+    cond = slots[0]._cond
+    with cond:
+        if all(s._item is None for s in slots) and not slots[0]._closed:
+            cond.wait(timeout)
+        for k, slot in enumerate(slots):
+            if slot._item is not None:
+                item, slot._item = slot._item, None
+                return k, item
+    return None
+
+
 class Window:
     """The last ``size`` samples of a quantity, with percentiles."""
 
@@ -161,6 +180,7 @@ class NodeStats:
     received: dict[str, int] = field(default_factory=lambda: {'color': 0, 'depth': 0,
                                                               'camera_info': 0})
     processed: int = 0
+    prepared: int = 0  # sets whose Sections 3-4 ran early, while the colour image was awaited
     colorless: int = 0
     duplicates: int = 0
     published_empty: int = 0
@@ -182,6 +202,7 @@ class NodeStats:
         """Flat, JSON-friendly snapshot."""
         return {
             'received': dict(self.received), 'sets': sets, 'processed': self.processed,
+            'prepared': self.prepared,
             'colorless': self.colorless, 'duplicates': self.duplicates,
             'skipped': skipped, 'dropped_unpaired': dict(dropped),
             'published_empty': self.published_empty, 'bad_input': self.bad_input,
