@@ -158,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
     if args.ros:
         from .ros.latency_bench import benchmark as ros_benchmark
 
-        out['ros'] = ros_benchmark()
+        out['ros'] = ros_benchmark(node_params=params.to_dict() if params else None)
     print_json(out, args.json)
     return 0
 
