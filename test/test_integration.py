@@ -142,3 +142,4 @@ def test_latency_bench_accounts_for_every_frame(bag):
     # Depth images that came before their colour partner were estimated early (the colour
     # and depth send times are jittered independently, so about half of them).
     assert int(result['node_diagnostics']['prepared']) > 0
+    assert int(result['node_diagnostics']['prepared_flow']) > 0  # and colour before depth

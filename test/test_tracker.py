@@ -463,3 +463,24 @@ def test_punching_fists_on_the_chest_keep_their_tracks():
             held += bool(len(tracked)) and np.linalg.norm(tracked - fist, axis=1).min() < TOL
     assert missed >= 60  # premise: the guard hides the fists from the single frame
     assert held >= 0.4 * missed, (held, missed)
+
+
+def test_update_with_early_estimate_and_flow_equals_update():
+    """What the node runs early (``Tracker.estimate`` on the depth, ``Tracker.flow`` on the
+    colour image) passed to ``update`` gives exactly what ``update`` alone gives."""
+    from endeff_ros.synth import render_sequence
+
+    whole, split = Tracker(), Tracker()
+    frames = [RGBDFrame(f.stamp_ns, f.frame_id, f.depth, f.intrinsics, f.color)
+              for f in render_sequence('waving_one_hand', quick=True) if f.depth is not None]
+    used_flow = 0
+    for i, frame in enumerate(frames):
+        a = whole.update(frame)
+        estimate = split.estimate(frame) if i % 3 != 1 else None
+        flow = split.flow(frame.color, frame.intrinsics) if i % 3 != 2 else None
+        used_flow += flow is not None
+        b = split.update(frame, estimate=estimate, flow=flow)
+        assert [t.id for t in a.tracks] == [t.id for t in b.tracks], i
+        np.testing.assert_array_equal(a.positions(), b.positions())
+        assert [t.state for t in a.tracks] == [t.state for t in b.tracks]
+    assert used_flow >= 4  # premise: the early flow was exercised

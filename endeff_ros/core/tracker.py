@@ -48,10 +48,13 @@ from .graph import approximate_geodesic, path_to_sources
 from .nearest import nearest_point
 from .params import EndeffParams
 from .single_frame import FrameEstimate, estimate_frame
-from .types import Candidate, RGBDFrame, Track
+from .types import Candidate, Intrinsics, RGBDFrame, Track
 
 if TYPE_CHECKING:
     import numpy.typing as npt
+
+    #: The tracker's region-of-interest flow: field, top-left pixel (u0, v0), scale (sx, sy).
+    RoiFlow = tuple[npt.NDArray[np.float32], tuple[int, int], tuple[float, float]]
 
 
 #: Pixels around the tracked end-effectors for which optical flow is computed: covers the
@@ -127,16 +130,30 @@ class Tracker:
         :meth:`update`, which a caller may run early (depth needs no colour) and pass on."""
         return estimate_frame(frame, self.params, floor=self._floor)
 
-    def update(self, frame: RGBDFrame, estimate: FrameEstimate | None = None) -> TrackerResult:
-        """Process one frame and return the current end-effectors. ``estimate``: what
-        :meth:`estimate` returned for this frame's depth, if it ran since the last update
-        (with the same parameters); computed here otherwise."""
+    def flow(self, color: npt.NDArray[np.uint8] | None,
+             intrinsics: Intrinsics) -> RoiFlow | None:
+        """Section 5.1's optical flow from the previous frame's colour image to ``color``
+        around the tracked anchors (None when there is nothing to predict): the part of
+        :meth:`update` that needs no depth, which a caller may run as soon as the colour
+        image arrives and pass on."""
+        prev, anchors = self._prev, self._anchors()
+        if (len(anchors) == 0 or prev is None or prev.color is None or color is None
+                or prev.color.shape != color.shape):
+            return None
+        return self._roi_flow(prev.color, color, anchors, intrinsics)
+
+    def update(self, frame: RGBDFrame, estimate: FrameEstimate | None = None,
+               flow: RoiFlow | None = None) -> TrackerResult:
+        """Process one frame and return the current end-effectors. ``estimate`` and
+        ``flow``: what :meth:`estimate` and :meth:`flow` returned for this frame's depth and
+        colour, if they ran since the last update (with the same parameters); computed here
+        otherwise."""
         if estimate is None:
             estimate = self.estimate(frame)
         self._floor = estimate.floor
         stages = dict(estimate.stage_ms)
         t0 = time.perf_counter()
-        predicted = self._predict(frame)
+        predicted = self._predict(frame, flow)
         stages['predict'] = (time.perf_counter() - t0) * 1e3
         t0 = time.perf_counter()
         self._tracks = self._update(estimate, predicted)
@@ -167,29 +184,33 @@ class Tracker:
         for track, offset in zip(self._tracks, offsets):
             track.offset = offset
 
-    def _predict(self, frame: RGBDFrame) -> npt.NDArray[np.float64]:
+    def _anchors(self) -> npt.NDArray[np.float64]:
+        return np.array([t.position - t.offset for t in self._tracks]).reshape(-1, 3)
+
+    def _predict(self, frame: RGBDFrame, flow: RoiFlow | None = None,
+                 ) -> npt.NDArray[np.float64]:
         """Anchors of E^pr_{t+1}: previous surface anchors moved by the scene flow (zero motion
         without a colour pair)."""
-        positions = np.array([t.position - t.offset for t in self._tracks]).reshape(-1, 3)
+        positions = self._anchors()
         prev = self._prev
         if (len(positions) == 0 or prev is None or prev.color is None or frame.color is None
                 or prev.depth.shape != frame.depth.shape):
             return positions
-        flow, origin, scale = self._roi_flow(prev, frame, positions)
-        moved, _ = propagate_points(positions, flow, prev.depth, frame.depth, frame.intrinsics,
-                                    flow_origin=origin, flow_scale=scale)
+        if flow is None:
+            flow = self._roi_flow(prev.color, frame.color, positions, frame.intrinsics)
+        moved, _ = propagate_points(positions, flow[0], prev.depth, frame.depth,
+                                    frame.intrinsics, flow_origin=flow[1], flow_scale=flow[2])
         return moved
 
-    def _roi_flow(self, prev: RGBDFrame, frame: RGBDFrame, anchors: npt.NDArray[np.float64],
-                  ) -> tuple[npt.NDArray[np.float32], tuple[int, int], tuple[float, float]]:
+    def _roi_flow(self, prev_color: npt.NDArray[np.uint8], color: npt.NDArray[np.uint8],
+                  anchors: npt.NDArray[np.float64], k: Intrinsics) -> RoiFlow:
         """Dense flow where it is needed: inside the box around the tracked anchors (with a
         margin for the window reads and the motion); returns the flow of that region at the
         estimator's working resolution, its top-left pixel (u0, v0) and its scale (sx, sy).
         Elsewhere there is no flow (``propagate_points`` then falls back as for missing
         flow). A person fills a fraction of a 640x480 frame, so this is several times cheaper
         than the whole image and gives the same vectors there."""
-        k = frame.intrinsics
-        h, w = frame.depth.shape
+        h, w = k.height, k.width
         uv = k.project(anchors[anchors[:, 2] > 1e-6]) if len(anchors) else np.zeros((0, 2))
         uv = uv[np.all(np.isfinite(uv), axis=1)]
         none = np.zeros((0, 0, 2), dtype=np.float32), (0, 0), (1.0, 1.0)
@@ -201,8 +222,8 @@ class Tracker:
         u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, w), min(v1, h)
         if u1 - u0 < 16 or v1 - v0 < 16:
             return none
-        flow = self._flow_estimator().flow(prev.color[v0:v1, u0:u1],
-                                           frame.color[v0:v1, u0:u1], upsample=False)
+        flow = self._flow_estimator().flow(prev_color[v0:v1, u0:u1], color[v0:v1, u0:u1],
+                                           upsample=False)
         scale = (flow.shape[1] / (u1 - u0), flow.shape[0] / (v1 - v0))
         return flow, (int(u0), int(v0)), scale
 

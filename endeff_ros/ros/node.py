@@ -7,8 +7,9 @@ Subscribes (relative, remappable names) to ``color/image_raw``, ``depth/image_ra
 Latency never grows: subscription callbacks only synchronise and put the newest set into a
 one-item slot; a worker thread takes the newest set, runs the tracker and publishes. Sets the
 worker was too slow for are skipped and counted. While a depth image waits for its colour
-partner, the worker already runs Sections 3-4 on it (they need no colour), so the colour
-image's delay and the depth processing overlap.
+partner, the worker already runs Sections 3-4 on it (they need no colour); while a colour
+image waits for its depth partner, it computes the optical flow (it needs no depth). Either
+way the partner's delay and part of the processing overlap.
 """
 
 from __future__ import annotations
@@ -78,6 +79,9 @@ class EndeffNode(Node):
         # of the last one: (depth stamp, frame without colour, estimate, params, ms).
         self._early: LatestSlot[tuple[Any, Any]] = self._slot.companion()
         self._prepared: tuple[int, Any, Any, EndeffParams, float] | None = None
+        # Likewise colour images for the early flow: (colour stamp, RGB array, flow, params, ms).
+        self._early_color: LatestSlot[tuple[Any, Any]] = self._slot.companion()
+        self._prepared_flow: tuple[int, Any, Any, EndeffParams, float] | None = None
         self._inputs = ['color', 'depth', 'camera_info'] if self._p('use_color') else [
             'depth', 'camera_info']
         self._last_info: Any = None
@@ -157,6 +161,8 @@ class EndeffNode(Node):
                     self._early.put((msg, self._last_info))
             ready = [self._claim(dict(zip(self._inputs, found)))
                      for found in self._sync.add(self._inputs.index(kind), stamp, msg)]
+            if kind == 'color' and not ready and self._last_info is not None:
+                self._early_color.put((msg, self._last_info))
         for msgs in ready:
             if msgs is not None:
                 self._slot.put((msgs, receipt))
@@ -220,12 +226,10 @@ class EndeffNode(Node):
     def _run(self) -> None:
         next_diag = next_log = time.monotonic()
         while not self._slot.closed:
-            got = take_first([self._slot, self._early], timeout=0.02)
+            got = take_first([self._slot, self._early, self._early_color], timeout=0.02)
             try:
-                if got is not None and got[0] == 0:
-                    self._process(*got[1])
-                elif got is not None:
-                    self._prepare(*got[1])
+                if got is not None:
+                    (self._process, self._prepare, self._prepare_flow)[got[0]](*got[1])
                 now = time.monotonic()
                 self._flush_colorless(now)
                 self._check_camera_info(now)
@@ -271,6 +275,22 @@ class EndeffNode(Node):
         self._prepared = (stamp, frame, estimate, self.tracker.params,
                           (time.perf_counter() - t0) * 1e3)
 
+    def _prepare_flow(self, color: Any, info: Any) -> None:
+        """The optical flow for a colour image whose depth partner has not arrived yet (the
+        tracker's :meth:`~endeff_ros.core.tracker.Tracker.flow`), for :meth:`_process`."""
+        flow_fn = getattr(self.tracker, 'flow', None)
+        with self._lock:
+            if flow_fn is None or self._params_pending is not None or self._reset_pending:
+                return
+        t0 = time.perf_counter()
+        try:
+            array = convert.color_image_to_array(color)
+            flow = flow_fn(array, convert.camera_info_to_intrinsics(info))
+        except InputError:
+            return  # _process reports it when the set comes
+        self._prepared_flow = (convert.stamp_to_ns(color.header.stamp), array, flow,
+                               self.tracker.params, (time.perf_counter() - t0) * 1e3)
+
     def _process(self, msgs: dict[str, Any], receipt: float) -> None:
         with self._lock:
             if self._params_pending is not None:
@@ -279,25 +299,38 @@ class EndeffNode(Node):
                 self.tracker.reset()
                 self._reset_pending = False
                 self.stats.resets += 1
-                self._prepared = None
+                self._prepared = self._prepared_flow = None
         depth = msgs['depth']
         header = depth.header
         t0 = time.perf_counter()
+        # Early results are used only by the set they were made for, and only by the next
+        # set processed (the tracker's state must not have changed in between).
         prepared, self._prepared = self._prepared, None
-        early_ms = 0.0
+        prepared_flow, self._prepared_flow = self._prepared_flow, None
+        color = msgs.get('color')
+        if not (prepared_flow is not None and color is not None
+                and prepared_flow[0] == convert.stamp_to_ns(color.header.stamp)
+                and prepared_flow[3] is self.tracker.params):
+            prepared_flow = None
+        early_ms, estimate, flow = 0.0, None, None
         try:
             if (prepared is not None and prepared[0] == convert.stamp_to_ns(header.stamp)
                     and prepared[3] is self.tracker.params
                     and msgs['camera_info'] is not None):
-                color = msgs.get('color')
-                frame = dataclasses.replace(prepared[1], color=None if color is None else
-                                            convert.color_image_to_array(color))
+                rgb = (None if color is None else prepared_flow[1] if prepared_flow
+                       else convert.color_image_to_array(color))
+                frame = dataclasses.replace(prepared[1], color=rgb)
                 estimate, early_ms = prepared[2], prepared[4]
                 self.stats.prepared += 1
+            elif prepared_flow is not None and msgs['camera_info'] is not None:
+                frame = dataclasses.replace(
+                    convert.frame_from_messages(None, depth, msgs['camera_info']),
+                    color=prepared_flow[1])
             else:
-                frame = convert.frame_from_messages(msgs.get('color'), depth,
-                                                    msgs['camera_info'])
-                estimate = None
+                frame = convert.frame_from_messages(color, depth, msgs['camera_info'])
+            if prepared_flow is not None:
+                flow, early_ms = prepared_flow[2], early_ms + prepared_flow[4]
+                self.stats.prepared_flow += flow is not None
         except InputError as exc:
             self.stats.bad_input += 1
             text = f'skipping input frame: {exc}'
@@ -308,8 +341,8 @@ class EndeffNode(Node):
             if not np.isfinite(frame.depth).any():
                 msg = f'depth image {frame.stamp_ns} ns has no valid reading (all 0 or NaN)'
                 raise InputError(msg)
-            result = (self.tracker.update(frame) if estimate is None
-                      else self.tracker.update(frame, estimate=estimate))
+            result = (self.tracker.update(frame) if estimate is None and flow is None
+                      else self.tracker.update(frame, estimate=estimate, flow=flow))
         except InputError as exc:
             text = f'no end-effectors in frame (publishing an empty cloud): {exc}'
             self.stats.warn('empty_frame', text)
@@ -363,8 +396,8 @@ class EndeffNode(Node):
         self.pub_diag.publish(array)
 
     def destroy_node(self) -> None:
-        self._slot.close()
-        self._early.close()
+        for slot in (self._slot, self._early, self._early_color):
+            slot.close()
         if self._worker.is_alive() and self._worker is not threading.current_thread():
             self._worker.join(timeout=5.0)
         super().destroy_node()

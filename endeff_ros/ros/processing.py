@@ -181,6 +181,7 @@ class NodeStats:
                                                               'camera_info': 0})
     processed: int = 0
     prepared: int = 0  # sets whose Sections 3-4 ran early, while the colour image was awaited
+    prepared_flow: int = 0  # sets whose optical flow ran early, while the depth was awaited
     colorless: int = 0
     duplicates: int = 0
     published_empty: int = 0
@@ -202,7 +203,7 @@ class NodeStats:
         """Flat, JSON-friendly snapshot."""
         return {
             'received': dict(self.received), 'sets': sets, 'processed': self.processed,
-            'prepared': self.prepared,
+            'prepared': self.prepared, 'prepared_flow': self.prepared_flow,
             'colorless': self.colorless, 'duplicates': self.duplicates,
             'skipped': skipped, 'dropped_unpaired': dict(dropped),
             'published_empty': self.published_empty, 'bad_input': self.bad_input,
