@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import time
 
 import numpy as np
 import pytest
@@ -289,6 +290,27 @@ def test_latest_slot_skips_unconsumed():
     assert slot.take(0) is None
     slot.close()
     assert slot.take(None) is None
+
+
+def test_take_first_prefers_the_first_slot_and_wakes_on_any():
+    import threading
+
+    from endeff_ros.ros.processing import take_first
+
+    sets: LatestSlot[str] = LatestSlot()
+    early = sets.companion()
+    early.put('depth 2')
+    sets.put('set 1')
+    assert take_first([sets, early], 0) == (0, 'set 1')  # complete sets first
+    assert take_first([sets, early], 0) == (1, 'depth 2')
+    assert take_first([sets, early], 0) is None
+    timer = threading.Timer(0.05, early.put, args=('depth 3',))
+    timer.start()
+    t0 = time.monotonic()
+    assert take_first([sets, early], 5.0) == (1, 'depth 3')  # a put on either slot wakes it
+    assert time.monotonic() - t0 < 2.0
+    sets.close()
+    assert take_first([sets, early], None) is None
 
 
 def test_depth_without_colour_is_processed_colourless_once(harness):
