@@ -60,6 +60,35 @@ _TOPICS = {'color': 'color/image_raw', 'depth': 'depth/image_raw',
            'camera_info': 'depth/camera_info'}
 
 
+@dataclasses.dataclass(frozen=True)
+class _Early:
+    """A result computed while its set was incomplete: Sections 3-4 of the depth image
+    (``data``: the frame without colour) or the flow to the colour image (``data``: the RGB
+    array); with the parameters it used and the milliseconds it took."""
+
+    stamp_ns: int
+    data: Any
+    result: Any
+    params: EndeffParams
+    ms: float
+
+    def fits(self, msg: Any, params: EndeffParams) -> bool:
+        """Made for this image, with these parameters."""
+        return (msg is not None and self.params is params
+                and self.stamp_ns == convert.stamp_to_ns(msg.header.stamp))
+
+
+def _frame(msgs: dict[str, Any], early: _Early | None, early_flow: _Early | None) -> Any:
+    """The set's RGBDFrame, reusing what the early work converted (InputError if unusable)."""
+    color, depth, info = msgs.get('color'), msgs['depth'], msgs['camera_info']
+    if info is None or (early is None and early_flow is None):
+        return convert.frame_from_messages(color, depth, info)
+    base = early.data if early else convert.frame_from_messages(None, depth, info)
+    rgb = (early_flow.data if early_flow else
+           None if color is None else convert.color_image_to_array(color))
+    return dataclasses.replace(base, color=rgb)
+
+
 class EndeffNode(Node):
     """The end-effector node. ``tracker_factory(params)`` builds the tracker (tests inject one)."""
 
@@ -75,13 +104,12 @@ class EndeffNode(Node):
         self.stats = NodeStats()
         self._lock = threading.Lock()
         self._slot: LatestSlot[tuple[dict[str, Any], float]] = LatestSlot()
-        # Depth images (with the camera info) ready for the early Sections 3-4, and the result
-        # of the last one: (depth stamp, frame without colour, estimate, params, ms).
+        # Depth images (with the camera info) waiting for the early Sections 3-4, colour images
+        # waiting for the early flow, and the last result of each.
         self._early: LatestSlot[tuple[Any, Any]] = self._slot.companion()
-        self._prepared: tuple[int, Any, Any, EndeffParams, float] | None = None
-        # Likewise colour images for the early flow: (colour stamp, RGB array, flow, params, ms).
         self._early_color: LatestSlot[tuple[Any, Any]] = self._slot.companion()
-        self._prepared_flow: tuple[int, Any, Any, EndeffParams, float] | None = None
+        self._prepared: _Early | None = None
+        self._prepared_flow: _Early | None = None
         self._inputs = ['color', 'depth', 'camera_info'] if self._p('use_color') else [
             'depth', 'camera_info']
         self._last_info: Any = None
@@ -272,8 +300,8 @@ class EndeffNode(Node):
             estimate = estimate_fn(frame)
         except InputError:
             return  # _process reports it when the set comes
-        self._prepared = (stamp, frame, estimate, self.tracker.params,
-                          (time.perf_counter() - t0) * 1e3)
+        self._prepared = _Early(stamp, frame, estimate, self.tracker.params,
+                                (time.perf_counter() - t0) * 1e3)
 
     def _prepare_flow(self, color: Any, info: Any) -> None:
         """The optical flow for a colour image whose depth partner has not arrived yet (the
@@ -288,8 +316,8 @@ class EndeffNode(Node):
             flow = flow_fn(array, convert.camera_info_to_intrinsics(info))
         except InputError:
             return  # _process reports it when the set comes
-        self._prepared_flow = (convert.stamp_to_ns(color.header.stamp), array, flow,
-                               self.tracker.params, (time.perf_counter() - t0) * 1e3)
+        self._prepared_flow = _Early(convert.stamp_to_ns(color.header.stamp), array, flow,
+                                     self.tracker.params, (time.perf_counter() - t0) * 1e3)
 
     def _process(self, msgs: dict[str, Any], receipt: float) -> None:
         with self._lock:
@@ -303,34 +331,16 @@ class EndeffNode(Node):
         depth = msgs['depth']
         header = depth.header
         t0 = time.perf_counter()
-        # Early results are used only by the set they were made for, and only by the next
-        # set processed (the tracker's state must not have changed in between).
-        prepared, self._prepared = self._prepared, None
-        prepared_flow, self._prepared_flow = self._prepared_flow, None
-        color = msgs.get('color')
-        if not (prepared_flow is not None and color is not None
-                and prepared_flow[0] == convert.stamp_to_ns(color.header.stamp)
-                and prepared_flow[3] is self.tracker.params):
-            prepared_flow = None
-        early_ms, estimate, flow = 0.0, None, None
+        # Early results serve only the set they were made for, and only the next set processed
+        # (the tracker's state must not have changed in between).
+        early, self._prepared = self._prepared, None
+        early_flow, self._prepared_flow = self._prepared_flow, None
+        params = self.tracker.params
+        early = early if early and early.fits(depth, params) else None
+        early_flow = early_flow if early_flow and early_flow.fits(msgs.get('color'), params) \
+            else None
         try:
-            if (prepared is not None and prepared[0] == convert.stamp_to_ns(header.stamp)
-                    and prepared[3] is self.tracker.params
-                    and msgs['camera_info'] is not None):
-                rgb = (None if color is None else prepared_flow[1] if prepared_flow
-                       else convert.color_image_to_array(color))
-                frame = dataclasses.replace(prepared[1], color=rgb)
-                estimate, early_ms = prepared[2], prepared[4]
-                self.stats.prepared += 1
-            elif prepared_flow is not None and msgs['camera_info'] is not None:
-                frame = dataclasses.replace(
-                    convert.frame_from_messages(None, depth, msgs['camera_info']),
-                    color=prepared_flow[1])
-            else:
-                frame = convert.frame_from_messages(color, depth, msgs['camera_info'])
-            if prepared_flow is not None:
-                flow, early_ms = prepared_flow[2], early_ms + prepared_flow[4]
-                self.stats.prepared_flow += flow is not None
+            frame = _frame(msgs, early, early_flow)
         except InputError as exc:
             self.stats.bad_input += 1
             text = f'skipping input frame: {exc}'
@@ -341,8 +351,13 @@ class EndeffNode(Node):
             if not np.isfinite(frame.depth).any():
                 msg = f'depth image {frame.stamp_ns} ns has no valid reading (all 0 or NaN)'
                 raise InputError(msg)
-            result = (self.tracker.update(frame) if estimate is None and flow is None
-                      else self.tracker.update(frame, estimate=estimate, flow=flow))
+            if early is None and early_flow is None:
+                result = self.tracker.update(frame)
+            else:
+                result = self.tracker.update(frame, estimate=early and early.result,
+                                             flow=early_flow and early_flow.result)
+                self.stats.prepared += early is not None
+                self.stats.prepared_flow += bool(early_flow and early_flow.result is not None)
         except InputError as exc:
             text = f'no end-effectors in frame (publishing an empty cloud): {exc}'
             self.stats.warn('empty_frame', text)
@@ -362,6 +377,7 @@ class EndeffNode(Node):
             self.pub_image.publish(convert.array_to_image_msg(header, image))
         self.stats.processed += 1
         self.stats.published_empty += not result.tracks
+        early_ms = sum(e.ms for e in (early, early_flow) if e is not None)
         self.stats.processing_ms.add((time.perf_counter() - t0) * 1e3 + early_ms)
         self.stats.age_ms.add((time.monotonic() - receipt) * 1e3)
         now_ns = self.get_clock().now().nanoseconds
