@@ -97,8 +97,8 @@ class Harness:
         self.clouds: list = []
         self.markers: list = []
         self.tester.create_subscription(PointCloud2, 'end_effectors', self.clouds.append, qos)
-        self.tester.create_subscription(MarkerArray, 'end_effectors/markers',
-                                        self.markers.append, qos)
+        self.markers_sub = self.tester.create_subscription(
+            MarkerArray, 'end_effectors/markers', self.markers.append, qos)
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
         self.executor.add_node(self.tester)
@@ -175,6 +175,21 @@ def test_empty_cloud_when_nothing_found(harness):
     assert h.wait_clouds(1)
     assert h.clouds[0].width == 0 and convert.stamp_to_ns(h.clouds[0].header.stamp) == 2e9
     assert [m.ns for m in h.markers[0].markers if m.action == 0] == [convert.NS_ROOT]
+
+
+def test_markers_are_built_only_for_subscribers(harness, monkeypatch):
+    h = harness()
+    calls: list[int] = []
+    build = convert.result_to_markers
+    monkeypatch.setattr(convert, 'result_to_markers',
+                        lambda *a, **k: calls.append(1) or build(*a, **k))
+    h.send(4_000_000_000)
+    assert h.wait_clouds(1) and len(calls) == 1  # a subscriber: built and published
+    h.tester.destroy_subscription(h.markers_sub)
+    assert spin_until(h.executor, lambda: h.node.pub_markers.get_subscription_count() == 0)
+    h.send(4_100_000_000)
+    assert spin_until(h.executor, lambda: len(h.clouds) >= 2)
+    assert len(calls) == 1  # nobody listens: the cloud is published, the markers not built
 
 
 def test_depth_only_mode(harness):
