@@ -82,13 +82,7 @@ class Neighbours:
     @classmethod
     def from_pairs(cls, n: int, i: npt.NDArray[np.intp], j: npt.NDArray[np.intp],
                    d: npt.NDArray[np.float64]) -> Neighbours:
-        rows = np.concatenate([i, j])
-        order = np.argsort(_sort_key(rows, n), kind='stable')
-        indices = np.concatenate([j, i])[order]
-        data = np.concatenate([d, d])[order]
-        indptr = np.zeros(n + 1, dtype=np.intp)
-        np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
-        return cls(n, i, j, d, indptr, indices, data)
+        return cls(n, i, j, d, *symmetric_csr(n, i, j, d))
 
     def within(self, radius: float) -> Neighbours:
         """The pairs closer than ``radius`` (a smaller radius than the one built with)."""
@@ -98,6 +92,19 @@ class Neighbours:
     def degree(self) -> npt.NDArray[np.intp]:
         """Number of neighbours of each point."""
         return np.diff(self.indptr)
+
+
+def symmetric_csr(n: int, i: npt.NDArray[np.intp], j: npt.NDArray[np.intp],
+                  d: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.intp],
+                                                        npt.NDArray[np.intp],
+                                                        npt.NDArray[np.float64]]:
+    """``(indptr, indices, data)`` of the symmetric (n, n) CSR matrix with ``d`` at (i, j)
+    and (j, i) for each pair; rows keep the pairs' order (stable sort)."""
+    rows = np.concatenate([i, j])
+    order = np.argsort(_sort_key(rows, n), kind='stable')
+    indptr = np.zeros(n + 1, dtype=np.intp)
+    np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
+    return indptr, np.concatenate([j, i])[order], np.concatenate([d, d])[order]
 
 
 def _sort_key(values: npt.NDArray[np.integer], n: int) -> npt.NDArray[np.integer]:

@@ -39,7 +39,13 @@ class FloorPlane:
 
     def distance(self, points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Signed height of (N, 3) points above the plane, metres."""
-        return points @ self.normal + self.offset
+        return self.heights(points[:, 0], points[:, 1], points[:, 2])
+
+    def heights(self, x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
+                z: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """:meth:`distance` of points given as x, y, z columns."""
+        nx, ny, nz = self.normal
+        return x * nx + y * ny + z * nz + self.offset
 
 
 def depth_to_points(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, *,
@@ -235,8 +241,7 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
                               min_fraction=params.floor_min_fraction,
                               iterations=params.floor_iterations, sample=_FLOOR_SAMPLE)
         if floor is not None:
-            nx, ny, nz = floor.normal
-            keep &= x * nx + y * ny + z * nz + floor.offset > params.floor_distance
+            keep &= floor.heights(x, y, z) > params.floor_distance
     x, y, z = x[keep], y[keep], z[keep]
     if params.voxel_size <= 0 or len(z) == 0:
         return np.stack([x, y, z], axis=1), floor

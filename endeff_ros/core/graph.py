@@ -19,7 +19,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
-from .bands import UNREACHED, Neighbours
+from .bands import UNREACHED, Neighbours, symmetric_csr
 
 if TYPE_CHECKING:
     import numpy.typing as npt
@@ -118,12 +118,8 @@ def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
     dense[rows, cols] = dense[cols, rows] = w
     # Both directions as a sparse matrix, searched as a directed graph: 3x cheaper than
     # handing csgraph the dense matrix (which it converts) or asking it to symmetrise.
-    src, dst = np.concatenate([rows, cols]), np.concatenate([cols, rows])
-    order = np.argsort(src, kind='stable')
-    indptr = np.zeros(k + 1, dtype=np.int32)
-    np.cumsum(np.bincount(src, minlength=k), out=indptr[1:])
-    both = sparse.csr_matrix((np.concatenate([w, w])[order], dst[order].astype(np.int32),
-                              indptr), shape=(k, k))
+    indptr, indices, data = symmetric_csr(k, rows, cols, w)
+    both = sparse.csr_matrix((data, indices, indptr), shape=(k, k))
     dist, pred = csgraph.dijkstra(both, directed=True, return_predecessors=True)
     return TopologyGraph(centroids, sizes, node_band, dense, dist, pred)
 
@@ -216,5 +212,13 @@ def approximate_geodesic(position: npt.NDArray[np.float64], graph: TopologyGraph
     The mid-band is the node halfway along the path (by node count); it makes the distance
     robust to occlusions that lengthen the full path (Fig. 3a).
     """
-    mid = graph.centroids[path[len(path) // 2]]
+    return approximate_geodesic_along(position, graph.centroids[path], root)
+
+
+def approximate_geodesic_along(position: npt.NDArray[np.float64],
+                               path_points: npt.NDArray[np.float64],
+                               root: npt.NDArray[np.float64]) -> float:
+    """Eq. 7 through a path given by its node positions (end-effector first), e.g. the path
+    a track kept from the frame it was last detected in."""
+    mid = path_points[len(path_points) // 2]
     return float(np.linalg.norm(position - mid) + np.linalg.norm(mid - root))

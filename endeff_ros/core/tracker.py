@@ -44,7 +44,7 @@ from scipy.optimize import linear_sum_assignment
 from .bands import UNREACHED
 from .cloud import FloorPlane
 from .flow import FlowEstimator, propagate_points
-from .graph import approximate_geodesic, path_to_sources
+from .graph import approximate_geodesic, approximate_geodesic_along, path_to_sources
 from .nearest import nearest_point
 from .params import EndeffParams
 from .single_frame import FrameEstimate, estimate_frame
@@ -276,8 +276,7 @@ class Tracker:
         if not np.isfinite(estimate.graph.dist[ent.root_node, node]):
             return np.nan
         if len(track.path) >= 2:
-            mid = track.path[len(track.path) // 2]
-            return float(np.linalg.norm(position - mid) + np.linalg.norm(mid - ent.root))
+            return approximate_geodesic_along(position, track.path, ent.root)
         path = path_to_sources(estimate.graph.pred[ent.root_node], node)
         return approximate_geodesic(position, estimate.graph, path, ent.root)
 
