@@ -235,6 +235,32 @@ def test_propagate_points_follows_a_depth_change_of_its_neighbourhood() -> None:
     assert out[0, 2] == pytest.approx(1.85)
 
 
+def test_point_that_slips_onto_a_surface_behind_is_lost() -> None:
+    """A hand (disc at 2.85 m) moves 30 px down in front of the legs (3.0 m) but the flow says
+    10 px: the moved window sees the legs, 15 cm deeper. The point must not be carried onto
+    the legs: zero motion, its own depth, not reliable."""
+    yy, xx = np.mgrid[0:H, 0:W]
+    hand = (xx - 320) ** 2 + (yy - 240) ** 2 <= 15 ** 2
+    hand_cur = (xx - 320) ** 2 + (yy - 270) ** 2 <= 15 ** 2
+    flow = np.zeros((H, W, 2), np.float32)
+    flow[hand, 1] = 10.0
+    prev_depth = np.where(hand, 2.85, 3.0).astype(np.float32)
+    cur_depth = np.where(hand_cur, 2.85, 3.0).astype(np.float32)
+    p = np.array([[(320 - K.cx) * 2.85 / K.fx, (228 - K.cy) * 2.85 / K.fy, 2.85]])
+    out, reliable = propagate_points(p, flow, prev_depth, cur_depth, K)
+    assert not reliable[0]
+    np.testing.assert_allclose(out, p, atol=1e-9)
+
+
+def test_receding_surface_within_the_tolerance_is_followed() -> None:
+    """A surface moving 8 cm away (less than the 10 cm tolerance) is followed, not lost."""
+    out, reliable = propagate_points(np.array([[0.1, 0.0, 2.0]]), _constant_flow(4.0, 0.0),
+                                     _depth(2.0), _depth(2.08), K)
+    assert reliable[0]
+    assert out[0, 2] == pytest.approx(2.08)
+    assert K.project(out)[0, 0] == pytest.approx(K.project(np.array([[0.1, 0.0, 2.0]]))[0, 0] + 4)
+
+
 def test_fallback_nan_depth_at_target() -> None:
     flow = _constant_flow(10.0, 0.0)
     cur_depth = _depth(2.0)

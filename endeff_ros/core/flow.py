@@ -283,6 +283,16 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
     zero motion (flow) or z + Δz (depth). Points that do not project into frame t (outside the
     image or z <= 0) are returned unchanged.
 
+    Lost surface (``reliable`` False, zero motion): a point whose new depth lies more than
+    ``depth_tolerance`` *behind* its old one. The flow then slipped off a part that moved
+    across a farther surface (a hand hanging in front of the legs, whose pixels now see the
+    legs; the flow of a small fast part is underestimated): its window reads the farther
+    surface as a depth change, and the point would be carried onto the legs and stay there.
+    Receding more than the tolerance in one frame (3 m/s at 30 Hz with 0.1 m) is rare for
+    a body part, approaching faster is kept (the neighbourhood Δz rule above). Measured on
+    the synthetic set (``make eval``): temporal FPR 0.048 -> 0.041 (bending 0.164 -> 0.118),
+    recall 0.951 -> 0.952.
+
     Vectorised over points (window gathers by fancy indexing; the large window only for the
     points that need it): about 0.5 ms for 20 points on one core.
     """
@@ -391,6 +401,10 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
         med, ok = depth_read(large, sel)
         z_new[sel[ok]] = med[ok]
     z_new = np.where(np.isfinite(z_new) & (z_new > 1e-6), z_new, z)
+    lost = inside & (z_new - z > depth_tolerance)  # it slipped onto a surface behind
+    if lost.any():
+        tu, tv, z_new = np.where(lost, u, tu), np.where(lost, v, tv), np.where(lost, z, z_new)
+        depth_ok &= ~lost
 
     out = pts.copy()
     out[:, 0] = np.where(inside, (tu - intrinsics.cx) * z_new / intrinsics.fx, x)
