@@ -163,11 +163,14 @@ def _xfail(reason):
 
 
 HEAD_OFF = (
-    'head candidate {:.3f} m from the head centre, almost all of it too deep (+{:.2f} m in z, '
-    '3.6 cm too high): the camera (1.1 m) sees the top of the head edge-on and _tip_position '
-    'adds the part radius along the viewing ray to a surface centroid that already lies at the '
-    'back of the head (with max_part_radius=0 the error is 0.056 m); hands and feet are within '
-    '5 cm (test_person_hands_and_feet)')
+    'head candidate {:.3f} m from the head centre, almost all of it too deep (+{:.2f} m in z): '
+    'the test renderer (shapes.add_capsule) spreads the samples of a capsule evenly along its '
+    'axis, so the caps of a short capsule like this head (2 cm long, 10 cm radius) get about '
+    '4 % of the samples instead of 91 %; the z-buffer then shows its back through its front '
+    '(280 of the 963 pixels within 13 cm of the head centre are more than 2 cm behind the '
+    'centre) and the tip region sits at the back of the head. With area-proportional sampling '
+    'the head is within 4.2 cm, but feet and tracker scenarios tuned on this renderer move '
+    '(see the session note of issue 2)')
 
 #: Measured failures with the default parameters (strict: a fix makes them XPASS and fail).
 TIP_XFAILS = {
@@ -175,9 +178,6 @@ TIP_XFAILS = {
     't_pose-seed1': _xfail(HEAD_OFF.format(0.108, 0.10)),
     'arms_down-seed0': _xfail(HEAD_OFF.format(0.118, 0.11)),
     'arms_down-seed1': _xfail(HEAD_OFF.format(0.105, 0.10)),
-    'chair-yaw0.5-seed1': _xfail(
-        'foot of the back-right leg (tip (0.271, 0.34, 2.48)) found 0.056 m away (> 0.05); '
-        'the other 5 tips within 0.043 m'),
     'robot_arm-seed1': _xfail(
         'pedestal foot (tip (-0.3, 1.0, 2.4)) found 0.051 m away at (-0.32, 1.014, 2.445), '
         'mostly too deep; gripper within 0.041 m'),
@@ -291,9 +291,7 @@ def test_star_seen_by_a_turned_camera(rotvec, n):
 
 
 @pytest.mark.parametrize('seed', [
-    pytest.param(0, marks=_xfail(
-        'the front-left leg foot (tip (-0.271, 0.34, 2.32) in the level camera) is found '
-        '0.054 m away (> 0.05); the other 5 tips within 0.049 m')),
+    0,
     1,
 ])
 def test_chair_seen_by_a_camera_pitched_down(seed):

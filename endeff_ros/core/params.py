@@ -109,8 +109,9 @@ class EndeffParams:
                            'at least this many frames (1: every track).', lo=1, hi=1000)
     memory_sigma: float = _p(0.9, 'Geodesic memory penalty, α = σ^k (Eqs. 8-9).', symbol='σ',
                              lo=0.0, hi=1.0)
-    duplicate_distance: float = _p(0.05, 'A predicted end-effector closer than this to a '
-                                   'detected (or longer-memory) one is dropped as a duplicate.',
+    duplicate_distance: float = _p(0.03, 'A predicted end-effector closer than this to a '
+                                   'detected (or longer-memory) one is dropped as a duplicate '
+                                   '(less than the ~8 cm between touching hands).',
                                    unit='m', lo=0.0, hi=1.0)
     max_rectify_distance: float = _p(0.15, 'A prediction farther than this from every '
                                      'current point is dropped.', unit='m', lo=0.0, hi=5.0)
