@@ -107,7 +107,7 @@ class EndeffParams:
                           symbol='T', lo=0, hi=1000)
     confirm_hits: int = _p(3, 'Case C keeps only tracks that current candidates supported in '
                            'at least this many frames (1: every track).', lo=1, hi=1000)
-    memory_sigma: float = _p(0.9, 'Geodesic memory penalty, α = σ^k (Eqs. 8-9).', symbol='σ',
+    memory_sigma: float = _p(0.99, 'Geodesic memory penalty, α = σ^k (Eqs. 8-9).', symbol='σ',
                              lo=0.0, hi=1.0)
     duplicate_distance: float = _p(0.03, 'A predicted end-effector closer than this to a '
                                    'detected (or longer-memory) one is dropped as a duplicate '
