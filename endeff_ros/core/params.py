@@ -181,8 +181,8 @@ NODE_NAME = 'endeff_node'
 #: Named parameter sets shipped as ``config/endeff_<name>.yaml`` (besides ``config/endeff.yaml``,
 #: the defaults). ``fast``: 4 cm voxels (932 instead of 1394 points on the benchmark frame),
 #: the sub-band sizes scaled with the voxel area; δ_L and λ unchanged. Measured on the
-#: synthetic benchmark (see the README): temporal recall 0.957 against 0.952, occlusion group
-#: 0.933 against 0.913, FPR 0.038 against 0.041, error 3.5 against 3.1 cm, about 0.75x the time
+#: synthetic benchmark (see the README): temporal recall 0.950 against 0.962, occlusion group
+#: 0.924 against 0.941, FPR 0.043 against 0.029, error 3.7 against 3.3 cm, about 0.75x the time
 #: per frame; too coarse for the 5 cm tip tests on the unit-test shapes, so not the default.
 #: (A first version also scaled δ_L and λ and median-filtered the depth: as fast, recall 0.929.)
 PRESETS: dict[str, dict[str, Any]] = {
