@@ -273,8 +273,10 @@ def _merge_small(graph: Neighbours, sub: npt.NDArray[np.intp], counts: npt.NDArr
         return sub
     si, sj = sub[graph.i], sub[graph.j]
     smallx = np.r_[small, False]  # index -1 (unreached) -> not small
-    fwd = smallx[si] & ~smallx[sj] & (sj != UNREACHED) & (graph.d < connect)
-    bwd = smallx[sj] & ~smallx[si] & (si != UNREACHED) & (graph.d < connect)
+    close = graph.d < connect
+    small_i, small_j = smallx[si], smallx[sj]
+    fwd = small_i & ~small_j & (sj != UNREACHED) & close
+    bwd = small_j & ~small_i & (si != UNREACHED) & close
     a = np.concatenate([si[fwd], sj[bwd]])
     b = np.concatenate([sj[fwd], si[bwd]])
     if a.size == 0:

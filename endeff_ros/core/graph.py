@@ -94,9 +94,10 @@ def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
     node_band = np.full(k, UNREACHED, dtype=np.intp)
     node_band[subband[reached]] = band[reached]
 
+    all_si, all_sj = subband[neighbours.i], subband[neighbours.j]
     near = neighbours.d < attach_distance
     pi, pj = neighbours.i[near], neighbours.j[near]
-    si, sj = subband[pi], subband[pj]
+    si, sj = all_si[near], all_sj[near]
     keep = (si != sj) & (si != UNREACHED) & (sj != UNREACHED)
     # touch[p, b]: point p has a point of sub-band b within λ (both directions of each pair).
     touch = np.zeros((len(points), k), dtype=bool)
@@ -110,7 +111,7 @@ def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
         sa, sb = subband[pairs[:, 0]], subband[pairs[:, 1]]
         ok = (sa != sb) & (sa != UNREACHED) & (sb != UNREACHED)
         attached[sa[ok], sb[ok]] = attached[sb[ok], sa[ok]] = True
-    _join_pieces(attached, centroids, subband[neighbours.i], subband[neighbours.j])
+    _join_pieces(attached, centroids, all_si, all_sj)
     rows, cols = np.nonzero(np.triu(attached, k=1))
     seg = centroids[rows] - centroids[cols]
     w = np.maximum(np.sqrt(np.einsum('ij,ij->i', seg, seg)), 1e-9)  # Eq. 5

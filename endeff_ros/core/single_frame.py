@@ -141,7 +141,8 @@ def _entities(points: npt.NDArray[np.float64], graph: Neighbours,
     n = graph.n
     if n == 0:
         return np.zeros(0, dtype=np.intp)
-    comp = graph.components(dense[graph.i] & dense[graph.j])
+    dense_i, dense_j = dense[graph.i], dense[graph.j]
+    comp = graph.components(dense_i & dense_j)
     comp = _merge_close(points, comp, dense, gap)
     counts = np.bincount(comp[dense], minlength=int(comp.max()) + 1)
     big = np.flatnonzero(counts >= min_points)
@@ -152,8 +153,10 @@ def _entities(points: npt.NDArray[np.float64], graph: Neighbours,
     label[~dense] = -1
     # Sparse points (failing Eq. 3) next to an entity belong to it: they are never banded,
     # and so are counted as unreachable instead of vanishing from the report.
-    for a, b in ((graph.i, graph.j), (graph.j, graph.i)) if not dense.all() else ():
-        stray = ~dense[a] & dense[b] & (label[b] >= 0)
+    for a, b, dense_a, dense_b in (((graph.i, graph.j, dense_i, dense_j),
+                                    (graph.j, graph.i, dense_j, dense_i))
+                                   if not dense.all() else ()):
+        stray = ~dense_a & dense_b & (label[b] >= 0)
         label[a[stray]] = label[b[stray]]
     return label
 
@@ -202,24 +205,31 @@ def _roots(points: npt.NDArray[np.float64], graph: Neighbours,
     n_entities = int(entity.max()) + 1 if entity.size else 0
     if n_entities == 0:
         return np.zeros(0, dtype=np.intp)
-    rough = np.array([_nearest(points, entity == e, _centroid(points, entity == e))
-                      for e in range(n_entities)], dtype=np.intp)
-    bands = expand_bands(graph, dense, rough, params.band_delta, max_bands=params.root_bands)
-    massive = (bands != UNREACHED) & (entity >= 0)
-    return np.array([_nearest(points, entity == e, _centroid(points, massive & (entity == e)))
-                     for e in range(n_entities)], dtype=np.intp)
+    members = np.flatnonzero(entity >= 0)
+    label = entity[members]
+    cols = [np.ascontiguousarray(points[members, a]) for a in range(3)]
+    rough = _nearest_to_centroids(cols, label, n_entities, np.ones(len(members), dtype=bool))
+    bands = expand_bands(graph, dense, members[rough], params.band_delta,
+                         max_bands=params.root_bands)
+    massive = bands[members] != UNREACHED
+    return members[_nearest_to_centroids(cols, label, n_entities, massive)]
 
 
-def _centroid(points: npt.NDArray[np.float64],
-              mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:
-    return points[mask].mean(axis=0)
-
-
-def _nearest(points: npt.NDArray[np.float64], mask: npt.NDArray[np.bool_],
-             target: npt.NDArray[np.float64]) -> int:
-    idx = np.flatnonzero(mask)
-    return int(idx[np.argmin(np.einsum('ij,ij->i', points[idx] - target,
-                                       points[idx] - target))])
+def _nearest_to_centroids(cols: list[npt.NDArray[np.float64]], label: npt.NDArray[np.intp],
+                          n: int, weight: npt.NDArray[np.bool_]) -> npt.NDArray[np.intp]:
+    """Per label 0..n-1: index (into ``label``) of the point nearest the centroid of that
+    label's points where ``weight``. ``cols`` are the x, y, z columns of the points; all
+    labels at once (bincounts and one stable sort), not a pass per entity."""
+    count = np.maximum(np.bincount(label[weight], minlength=n), 1)
+    d2 = np.zeros(len(label))
+    for c in cols:
+        centre = np.bincount(label[weight], weights=c[weight], minlength=n) / count
+        d2 += (c - centre[label]) ** 2
+    if n == 1:
+        return np.array([np.argmin(d2)], dtype=np.intp)
+    order = np.lexsort((d2, label))  # by label, nearest first (ties: lowest index)
+    first = np.r_[True, label[order][1:] != label[order][:-1]]
+    return order[first]
 
 
 class _Members:
