@@ -442,9 +442,11 @@ def test_clapping_sequence_temporal_recall_beats_single_frame():
 def test_punching_fists_on_the_chest_keep_their_tracks():
     """Between punches the fists rest on the chest: no extremum (the elbows are). A predicted
     fist keeps the distance of its arm (Eq. 7 through the mid-band of its last detected path,
-    Section 5.2), so its track holds the fist in at least 40 % of the frames in which the
-    single-frame estimate misses it (measured 48 %; 25 % with Eq. 7 through the current
-    graph, which puts the fist at the chest's distance and lets the elbow win case B)."""
+    Section 5.2), and the memory of that distance fades slowly (σ = 0.99, Eq. 9), so its
+    track holds the fist in at least 55 % of the frames in which the single-frame estimate
+    misses it (measured 65 %; 42 % with σ = 0.9; 25 % with σ = 0.9 and Eq. 7 through the
+    current graph, which puts the fist at the chest's distance and lets the elbow win
+    case B)."""
     from endeff_ros.synth import render_sequence
 
     params = EndeffParams()
@@ -462,7 +464,7 @@ def test_punching_fists_on_the_chest_keep_their_tracks():
             missed += 1
             held += bool(len(tracked)) and np.linalg.norm(tracked - fist, axis=1).min() < TOL
     assert missed >= 60  # premise: the guard hides the fists from the single frame
-    assert held >= 0.4 * missed, (held, missed)
+    assert held >= 0.55 * missed, (held, missed)
 
 
 def test_update_with_early_estimate_and_flow_equals_update():
