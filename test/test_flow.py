@@ -37,6 +37,27 @@ def _depth(value: float) -> np.ndarray:
     return np.full((H, W), value, np.float32)
 
 
+def _at(u: float, v: float, z: float) -> np.ndarray:
+    """(1, 3) point seen at pixel (u, v) at depth z."""
+    return np.array([[(u - K.cx) * z / K.fx, (v - K.cy) * z / K.fy, z]])
+
+
+def _moving_disc(radius: int, shift: tuple[int, int], flow: tuple[float, float],
+                 depth: tuple[float, float], background: float,
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A disc centred at (320, 240) in front of a flat ``background`` moves by ``shift``
+    pixels; the flow field says ``flow`` on the disc and 0 elsewhere. ``depth``: the disc's
+    depth before and after. Returns (flow, previous depth, current depth)."""
+    yy, xx = np.mgrid[0:H, 0:W]
+    disc = (xx - 320) ** 2 + (yy - 240) ** 2 <= radius ** 2
+    moved = (xx - 320 - shift[0]) ** 2 + (yy - 240 - shift[1]) ** 2 <= radius ** 2
+    field = np.zeros((H, W, 2), np.float32)
+    field[disc] = flow
+    prev = np.where(disc, depth[0], background).astype(np.float32)
+    cur = np.where(moved, depth[1], background).astype(np.float32)
+    return field, prev, cur
+
+
 # --- FlowEstimator -------------------------------------------------------------------------------
 
 @pytest.mark.parametrize(('du', 'dv'), [(6.0, -3.0), (-2.5, 4.0), (12.0, 5.0)])
@@ -197,13 +218,13 @@ def test_propagate_points_takes_the_motion_of_its_own_surface() -> None:
     finger_cur = (np.abs(xx - 330) <= 1) & (np.abs(yy - 240) <= 40)
     cur_depth = np.where(finger_cur, 1.52, 2.5).astype(np.float32)
     u, v = 320, 240
-    p = np.array([[(u - K.cx) * 1.5 / K.fx, (v - K.cy) * 1.5 / K.fy, 1.5]])
+    p = _at(u, v, 1.5)
     out, reliable = propagate_points(p, flow, prev_depth, cur_depth, K, window=7)
     assert reliable[0]
     assert out[0, 2] == pytest.approx(1.52, abs=1e-6)  # not the torso's 2.5 m
     assert K.project(out)[0] == pytest.approx([u + 10, v], abs=1e-6)
     # A point on the torso 4 px beside the finger stays put.
-    q = np.array([[(316 - K.cx) * 2.5 / K.fx, (v - K.cy) * 2.5 / K.fy, 2.5]])
+    q = _at(316, v, 2.5)
     out, reliable = propagate_points(q, flow, prev_depth, cur_depth, K)
     assert reliable[0]
     np.testing.assert_allclose(out, q, atol=1e-6)
@@ -212,14 +233,8 @@ def test_propagate_points_takes_the_motion_of_its_own_surface() -> None:
 def test_occluded_point_keeps_its_depth() -> None:
     """A torso point (2.5 m) that a hand (disc at 1.5 m moving 10 px right) covers in the
     current frame keeps its own depth instead of jumping onto the hand, and is flagged."""
-    yy, xx = np.mgrid[0:H, 0:W]
-    hand = (xx - 320) ** 2 + (yy - 240) ** 2 <= 30 ** 2
-    flow = np.zeros((H, W, 2), np.float32)
-    flow[hand, 0] = 10.0
-    prev_depth = np.where(hand, 1.5, 2.5).astype(np.float32)
-    hand_cur = (xx - 330) ** 2 + (yy - 240) ** 2 <= 30 ** 2
-    cur_depth = np.where(hand_cur, 1.52, 2.5).astype(np.float32)
-    r = np.array([[(356 - K.cx) * 2.5 / K.fx, (240 - K.cy) * 2.5 / K.fy, 2.5]])
+    flow, prev_depth, cur_depth = _moving_disc(30, (10, 0), (10.0, 0.0), (1.5, 1.52), 2.5)
+    r = _at(356, 240, 2.5)
     out, reliable = propagate_points(r, flow, prev_depth, cur_depth, K)
     assert not reliable[0]
     np.testing.assert_allclose(out, r, atol=1e-6)
@@ -239,14 +254,8 @@ def test_point_that_slips_onto_a_surface_behind_is_lost() -> None:
     """A hand (disc at 2.85 m) moves 30 px down in front of the legs (3.0 m) but the flow says
     10 px: the moved window sees the legs, 15 cm deeper. The point must not be carried onto
     the legs: zero motion, its own depth, not reliable."""
-    yy, xx = np.mgrid[0:H, 0:W]
-    hand = (xx - 320) ** 2 + (yy - 240) ** 2 <= 15 ** 2
-    hand_cur = (xx - 320) ** 2 + (yy - 270) ** 2 <= 15 ** 2
-    flow = np.zeros((H, W, 2), np.float32)
-    flow[hand, 1] = 10.0
-    prev_depth = np.where(hand, 2.85, 3.0).astype(np.float32)
-    cur_depth = np.where(hand_cur, 2.85, 3.0).astype(np.float32)
-    p = np.array([[(320 - K.cx) * 2.85 / K.fx, (228 - K.cy) * 2.85 / K.fy, 2.85]])
+    flow, prev_depth, cur_depth = _moving_disc(15, (0, 30), (0.0, 10.0), (2.85, 2.85), 3.0)
+    p = _at(320, 228, 2.85)
     out, reliable = propagate_points(p, flow, prev_depth, cur_depth, K)
     assert not reliable[0]
     np.testing.assert_allclose(out, p, atol=1e-9)
@@ -277,7 +286,7 @@ def test_fallback_nan_depth_only_near_target_uses_larger_window() -> None:
     flow = _constant_flow(10.0, 0.0)
     cur_depth = _depth(2.05)
     cur_depth[234:247, 334:347] = np.nan  # 13x13 hole around the target pixel (340, 240)
-    p = np.array([[(330 - K.cx) * 2.0 / K.fx, (240 - K.cy) * 2.0 / K.fy, 2.0]])
+    p = _at(330, 240, 2.0)
     out, reliable = propagate_points(p, flow, _depth(2.0), cur_depth, K)
     assert not reliable[0]
     assert out[0, 2] == pytest.approx(2.05)
@@ -295,7 +304,7 @@ def test_fallback_nan_flow() -> None:
 def test_fallback_nan_flow_near_point_uses_larger_window() -> None:
     flow = _constant_flow(6.0, -2.0)
     flow[234:247, 314:327] = np.nan  # 13x13 hole around (320, 240)
-    p = np.array([[(320 - K.cx) * 2.0 / K.fx, (240 - K.cy) * 2.0 / K.fy, 2.0]])
+    p = _at(320, 240, 2.0)
     out, reliable = propagate_points(p, flow, _depth(2.0), _depth(2.0), K)
     assert not reliable[0]
     assert K.project(out)[0] == pytest.approx([326.0, 238.0], abs=1e-6)

@@ -414,25 +414,30 @@ def test_params_change_between_frames_takes_effect():
     assert all(t.id != tid for t in tracker.update(shots[3].frame).tracks)
 
 
+def _rendered(name: str, *, quick: bool = False):
+    """(RGB-D frame, ground truth) of a synthetic sequence; frames whose depth image the
+    sequence drops are no RGB-D frames and are skipped."""
+    from endeff_ros.synth import render_sequence
+
+    for f in render_sequence(name, quick=quick):
+        if f.depth is not None:
+            yield RGBDFrame(f.stamp_ns, f.frame_id, f.depth, f.intrinsics, f.color), f.gt
+
+
 # -- 7. The synthetic 'clapping' sequence: temporal recall above single-frame recall ------------
 
 
 @pytest.mark.slow
 def test_clapping_sequence_temporal_recall_beats_single_frame():
-    from endeff_ros.synth import render_sequence
-
     params = EndeffParams(keep_frames=5)
     tracker = Tracker(params)
     scorers = {'temporal': SequenceScorer(), 'single_frame': SequenceScorer()}
     frames = 0
-    for f in render_sequence('clapping', quick=False):
-        if f.depth is None:  # a dropped depth frame is no RGB-D frame
-            continue
+    for frame, gt in _rendered('clapping'):
         frames += 1
-        frame = RGBDFrame(f.stamp_ns, f.frame_id, f.depth, f.intrinsics, f.color)
         res = tracker.update(frame)
-        scorers['temporal'].add(res.positions(), f.gt)
-        scorers['single_frame'].add(estimate_frame(frame, params).positions(), f.gt)
+        scorers['temporal'].add(res.positions(), gt)
+        scorers['single_frame'].add(estimate_frame(frame, params).positions(), gt)
     assert frames >= 70
     temporal = scorers['temporal'].result()
     single = scorers['single_frame'].result()
@@ -447,18 +452,13 @@ def test_punching_fists_on_the_chest_keep_their_tracks():
     misses it (measured 65 %; 42 % with σ = 0.9; 25 % with σ = 0.9 and Eq. 7 through the
     current graph, which puts the fist at the chest's distance and lets the elbow win
     case B)."""
-    from endeff_ros.synth import render_sequence
-
     params = EndeffParams()
     tracker = Tracker(params)
     missed = held = 0
-    for f in render_sequence('punching', quick=False):
-        if f.depth is None:
-            continue
-        frame = RGBDFrame(f.stamp_ns, f.frame_id, f.depth, f.intrinsics, f.color)
+    for frame, gt in _rendered('punching'):
         tracked = tracker.update(frame).positions()
         single = estimate_frame(frame, params).positions()
-        for fist in np.asarray(f.gt)[1:3]:  # ground truth 1, 2: the hands
+        for fist in np.asarray(gt)[1:3]:  # ground truth 1, 2: the hands
             if len(single) and np.linalg.norm(single - fist, axis=1).min() < TOL:
                 continue
             missed += 1
@@ -473,15 +473,10 @@ def test_bending_hand_predictions_do_not_slip_onto_the_legs():
     stay there as a false positive. Scene flow drops such a step (``propagate_points``: a
     depth change of more than the tolerance away from the camera is a lost surface), so the
     sequence's temporal FPR stays below 0.08 (measured 0.051; 0.122 without that rule)."""
-    from endeff_ros.synth import render_sequence
-
     tracker = Tracker(EndeffParams())
     scorer = SequenceScorer()
-    for f in render_sequence('bending', quick=False):
-        if f.depth is None:
-            continue
-        frame = RGBDFrame(f.stamp_ns, f.frame_id, f.depth, f.intrinsics, f.color)
-        scorer.add(tracker.update(frame).positions(), f.gt)
+    for frame, gt in _rendered('bending'):
+        scorer.add(tracker.update(frame).positions(), gt)
     result = scorer.result()
     assert result.recall > 0.9, result
     assert result.fpr < 0.08, result
@@ -490,11 +485,8 @@ def test_bending_hand_predictions_do_not_slip_onto_the_legs():
 def test_update_with_early_estimate_and_flow_equals_update():
     """What the node runs early (``Tracker.estimate`` on the depth, ``Tracker.flow`` on the
     colour image) passed to ``update`` gives exactly what ``update`` alone gives."""
-    from endeff_ros.synth import render_sequence
-
     whole, split = Tracker(), Tracker()
-    frames = [RGBDFrame(f.stamp_ns, f.frame_id, f.depth, f.intrinsics, f.color)
-              for f in render_sequence('waving_one_hand', quick=True) if f.depth is not None]
+    frames = [frame for frame, _ in _rendered('waving_one_hand', quick=True)]
     used_flow = 0
     for i, frame in enumerate(frames):
         a = whole.update(frame)
