@@ -55,6 +55,7 @@ if TYPE_CHECKING:
 
     from endeff_ros.core.params import EndeffParams
     from endeff_ros.core.types import RGBDFrame
+    from endeff_ros.scoring import FrameScore
 
     EstimateFn = Callable[[RGBDFrame, EndeffParams | None], Any]
     TrackerFactory = Callable[[EndeffParams | None], Any]
@@ -94,6 +95,14 @@ def _positions(tracks: Sequence[Any]) -> npt.NDArray[np.float64]:
                     dtype=np.float64).reshape(-1, 3)
 
 
+def _predicted_unmatched(tracks: Sequence[Any], score: FrameScore) -> int:
+    """Tracks left unmatched by ``score`` (false positives) whose state is predicted (1);
+    tracks without a ``state`` (a custom tracker's) count as detections."""
+    matched = set(score.matches[:, 0].tolist())
+    return sum(1 for k, t in enumerate(tracks)
+               if k not in matched and getattr(t, 'state', 0) == 1)
+
+
 @dataclass
 class SequenceResult:
     """Everything measured on one bag."""
@@ -107,6 +116,8 @@ class SequenceResult:
     stats: dict[str, Any] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
     input_errors: dict[str, int] = field(default_factory=dict)
+    #: Temporal false positives that were predicted tracks (state 1), not detections.
+    predicted_false_positives: int = 0
 
     @property
     def frames(self) -> int:
@@ -131,6 +142,7 @@ class SequenceResult:
         out['path'] = self.path
         out['topics'] = self.topics
         out['counts'] = {m: summary_dict(self.scorers[m]) for m in METHODS}
+        out['counts']['temporal']['predicted_false_positives'] = self.predicted_false_positives
         out['estimator_input_errors'] = dict(self.input_errors)
         out['seconds'] = {k: round(v, 4) for k, v in self.seconds.items()}
         out['read_stats'] = self.stats
@@ -178,8 +190,10 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
             except StopIteration:
                 break
             t1 = time.perf_counter()
+            tracks: Sequence[Any] = ()
             try:
-                est = {'temporal': _positions(tracker.update(frame).tracks)}
+                tracks = tracker.update(frame).tracks
+                est = {'temporal': _positions(tracks)}
             except InputError:
                 res.input_errors['temporal'] += 1
                 est = {'temporal': np.zeros((0, 3))}
@@ -198,6 +212,8 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
                 score = res.scorers[m].add(est[m], gt)
                 if score is not None:
                     res.recalls[m].append(score.recall)
+                    if m == 'temporal':
+                        res.predicted_false_positives += _predicted_unmatched(tracks, score)
             if gt is not None:
                 res.stamps_ns.append(frame.stamp_ns)
         res.stats = bag.stats.to_dict()

@@ -211,3 +211,28 @@ def test_real_estimators_on_synth_bags(tmp_path: Path) -> None:
         assert a['temporal'] == b['temporal']  # same content, either storage
         assert not math.isnan(a['temporal']['recall'])
     assert set(report['groups']) == {'no_occlusion', 'generic'}
+
+
+class _TrackerWithStrays(FakeTracker):
+    """FakeTracker plus two far-away tracks per frame: one detected, one predicted."""
+
+    def update(self, frame: Any) -> Any:
+        from endeff_ros.core.types import Track
+
+        result = super().update(frame)
+        for k, state in enumerate((Track.DETECTED, Track.PREDICTED)):
+            stray = np.array([5.0, 5.0, 5.0 + k])
+            result.tracks.append(Track(id=100 + k, entity=0, position=stray, geodesic=1.0,
+                                       confidence=0.5, state=state, age=self.frames,
+                                       path=np.zeros((1, 3))))
+        return result
+
+
+def test_predicted_false_positives_are_counted(tmp_path: Path) -> None:
+    write_bag(tmp_path / 'seq', BagSpec(frames=5, gt_frames={0, 1, 3}))
+    report, _ = evaluate_bags([tmp_path / 'seq'], estimate_fn=fake_estimate_frame,
+                              tracker_factory=_TrackerWithStrays)
+    counts = report['sequences'][0]['counts']['temporal']
+    # Two strays in each of the 3 scored frames; one of each pair is a predicted track.
+    assert counts['predicted_false_positives'] == 3
+    assert report['sequences'][0]['temporal']['fpr'] == pytest.approx(2 / 5)  # per frame, Eq. 12
