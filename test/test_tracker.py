@@ -497,3 +497,25 @@ def test_update_with_early_estimate_and_flow_equals_update():
         np.testing.assert_array_equal(a.positions(), b.positions())
         assert [t.state for t in a.tracks] == [t.state for t in b.tracks]
     assert used_flow >= 4  # premise: the early flow was exercised
+
+
+# -- Warm-up (the node runs it before subscribing) -----------------------------------------------
+
+
+def test_warm_up_runs_every_stage_and_leaves_no_state():
+    from endeff_ros.core.warmup import warm_up, warm_up_frames
+
+    first, second = warm_up_frames()
+    probe = Tracker()
+    assert len(probe.update(first).tracks) == 4  # the star's four limbs
+    assert probe.flow(second.color, second.intrinsics) is not None  # the predict path runs
+
+    shots = sc.clap()[:4]
+    frames = [s.frame for s in shots]
+    warmed = Tracker()
+    assert warm_up(warmed) == 4
+    fresh = Tracker()
+    for frame in frames:
+        a, b = warmed.update(frame), fresh.update(frame)
+        assert [(t.id, t.state) for t in a.tracks] == [(t.id, t.state) for t in b.tracks]
+        np.testing.assert_allclose(a.positions(), b.positions())

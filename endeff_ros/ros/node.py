@@ -9,7 +9,8 @@ one-item slot; a worker thread takes the newest set, runs the tracker and publis
 worker was too slow for are skipped and counted. While a depth image waits for its colour
 partner, the worker already runs Sections 3-4 on it (they need no colour); while a colour
 image waits for its depth partner, it computes the optical flow (it needs no depth). Either
-way the partner's delay and part of the processing overlap.
+way the partner's delay and part of the processing overlap. Before subscribing, the node
+warms its tracker up (:mod:`endeff_ros.core.warmup`) so that the first frames are not skipped.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from visualization_msgs.msg import MarkerArray
 from endeff_ros.core.errors import InputError, ParameterError
 from endeff_ros.core.params import NODE_NAME, EndeffParams, describe
 from endeff_ros.core.tracker import Tracker
+from endeff_ros.core.warmup import warm_up
 from endeff_ros.ros import convert
 from endeff_ros.ros.processing import (
     NODE_PARAMS,
@@ -101,6 +103,8 @@ class EndeffNode(Node):
             {row['name']: self.get_parameter(row['name']).value for row in describe()})
         validate_node_changes({r['name']: self._p(r['name']) for r in NODE_PARAMS})
         self.tracker = tracker_factory(self.params)
+        if isinstance(self.tracker, Tracker):
+            self._warm_up()
         self.stats = NodeStats()
         self._lock = threading.Lock()
         self._slot: LatestSlot[tuple[dict[str, Any], float]] = LatestSlot()
@@ -141,6 +145,16 @@ class EndeffNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._worker = threading.Thread(target=self._run, name='endeff_worker', daemon=True)
         self._worker.start()
+
+    def _warm_up(self) -> None:
+        """First-frame costs paid before subscribing (:mod:`endeff_ros.core.warmup`)."""
+        t0 = time.perf_counter()
+        try:
+            warm_up(self.tracker)
+        except Exception as exc:  # noqa: BLE001 - a failed warm-up only costs latency
+            self.get_logger().warning(f'warm-up failed (first frames may be slow): {exc!r}')
+            return
+        self.get_logger().debug(f'warm-up took {(time.perf_counter() - t0) * 1e3:.0f} ms')
 
     # ---------------------------------------------------------------- parameters and inputs
     def _p(self, name: str) -> Any:
