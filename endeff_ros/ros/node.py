@@ -16,6 +16,7 @@ warms its tracker up (:mod:`endeff_ros.core.warmup`) so that the first frames ar
 from __future__ import annotations
 
 import dataclasses
+import gc
 import json
 import threading
 import time
@@ -155,6 +156,11 @@ class EndeffNode(Node):
             self.get_logger().warning(f'warm-up failed (first frames may be slow): {exc!r}')
             return
         self.get_logger().debug(f'warm-up took {(time.perf_counter() - t0) * 1e3:.0f} ms')
+        # Startup objects (modules, messages, the warm-up's arrays) move out of the collector's
+        # generations, so its full passes during the stream are shorter: in 3 alternating
+        # pairs of latency_bench runs, p95 0.3-1.7 ms lower above the relay, p99 1-4 ms lower.
+        gc.collect()
+        gc.freeze()
 
     # ---------------------------------------------------------------- parameters and inputs
     def _p(self, name: str) -> Any:
