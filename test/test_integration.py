@@ -143,3 +143,6 @@ def test_latency_bench_accounts_for_every_frame(bag):
     # and depth send times are jittered independently, so about half of them).
     assert int(result['node_diagnostics']['prepared']) > 0
     assert int(result['node_diagnostics']['prepared_flow']) > 0  # and colour before depth
+    # Colour images arriving while their depth partner was being estimated got their optical
+    # flow computed in the callback, alongside.
+    assert int(result['node_diagnostics']['flow_alongside']) > 0

@@ -61,7 +61,7 @@ def ros_latency_bench(bag: str | Path | None = None, *, rate_hz: float = 30.0,
                              max_frames=max_frames, loops=loops, frame_timeout_s=5.0,
                              node_params=node_params, markers=markers)
     diag = record.get('diagnostics', {})
-    keys = ('processed', 'prepared', 'prepared_flow', 'skipped', 'colorless',
+    keys = ('processed', 'prepared', 'prepared_flow', 'flow_alongside', 'skipped', 'colorless',
             'dropped_unpaired.color', 'dropped_unpaired.depth', 'processing_ms.p50',
             'processing_ms.p95', 'processing_ms.p99')
     return {'bag': str(path), 'rate_hz': rate_hz, 'loops': loops,

@@ -8,8 +8,10 @@ Latency never grows: subscription callbacks only synchronise and put the newest 
 one-item slot; a worker thread takes the newest set, runs the tracker and publishes. Sets the
 worker was too slow for are skipped and counted. While a depth image waits for its colour
 partner, the worker already runs Sections 3-4 on it (they need no colour); while a colour
-image waits for its depth partner, it computes the optical flow (it needs no depth). Either
-way the partner's delay and part of the processing overlap. Before subscribing, the node
+image waits for its depth partner, it computes the optical flow (it needs no depth); a colour
+image that arrives while the worker estimates its depth partner gets its flow computed in the
+subscription callback, on the other core (OpenCV releases the GIL). Either way the partner's
+delay and part of the processing overlap. Before subscribing, the node
 warms its tracker up (:mod:`endeff_ros.core.warmup`) so that the first frames are not skipped.
 """
 
@@ -74,6 +76,7 @@ class _Early:
     result: Any
     params: EndeffParams
     ms: float
+    updates: int = 0  # tracker updates done before it was computed (flow: must be current)
 
     def fits(self, msg: Any, params: EndeffParams) -> bool:
         """Made for this image, with these parameters."""
@@ -115,6 +118,11 @@ class EndeffNode(Node):
         self._early_color: LatestSlot[tuple[Any, Any]] = self._slot.companion()
         self._prepared: _Early | None = None
         self._prepared_flow: _Early | None = None
+        # Depth stamp whose early Sections 3-4 the worker is running (None: not running), and
+        # the lock that keeps tracker state reads (flow) apart from tracker updates.
+        self._estimating_ns: int | None = None
+        self._tracker_lock = threading.Lock()
+        self._updates = 0
         self._inputs = ['color', 'depth', 'camera_info'] if self._p('use_color') else [
             'depth', 'camera_info']
         self._last_info: Any = None
@@ -188,6 +196,7 @@ class EndeffNode(Node):
     def _on_input(self, kind: str, msg: Any) -> None:
         receipt = time.monotonic()
         stamp = convert.stamp_to_ns(msg.header.stamp)
+        flow_done = kind == 'color' and self._flow_alongside(msg, stamp)
         with self._lock:
             self.stats.received[kind] += 1
             if kind == 'camera_info':
@@ -209,11 +218,26 @@ class EndeffNode(Node):
                     self._early.put((msg, self._last_info))
             ready = [self._claim(dict(zip(self._inputs, found)))
                      for found in self._sync.add(self._inputs.index(kind), stamp, msg)]
-            if kind == 'color' and not ready and self._last_info is not None:
+            if (kind == 'color' and not ready and not flow_done
+                    and self._last_info is not None):
                 self._early_color.put((msg, self._last_info))
         for msgs in ready:
             if msgs is not None:
                 self._slot.put((msgs, receipt))
+
+    def _flow_alongside(self, color: Any, stamp: int) -> bool:
+        """Compute the optical flow of a colour image right here, in the subscription
+        callback, while the worker runs the early Sections 3-4 of its depth partner: OpenCV
+        releases the GIL, so the two run on two cores, and the set is complete with both
+        parts done when the worker finishes (otherwise the worker ran the flow after the
+        estimate). True if it did."""
+        with self._lock:
+            estimating, info = self._estimating_ns, self._last_info
+            slop = round(self._p('sync_slop') * 1e9)
+            if estimating is None or info is None or abs(stamp - estimating) > slop:
+                return False
+        self.stats.flow_alongside += self._prepare_flow(color, info)
+        return True
 
     def _claim(self, msgs: dict[str, Any]) -> dict[str, Any] | None:
         """Accept a set unless its depth is not newer than one already handed on (lock held)."""
@@ -312,6 +336,7 @@ class EndeffNode(Node):
             if (estimate_fn is None or self._params_pending is not None or self._reset_pending
                     or (self._floor_ns is not None and stamp <= self._floor_ns)):
                 return
+            self._estimating_ns = stamp
         t0 = time.perf_counter()
         try:
             frame = convert.frame_from_messages(None, depth, info)
@@ -320,31 +345,41 @@ class EndeffNode(Node):
             estimate = estimate_fn(frame)
         except InputError:
             return  # _process reports it when the set comes
+        finally:
+            with self._lock:
+                self._estimating_ns = None
         self._prepared = _Early(stamp, frame, estimate, self.tracker.params,
                                 (time.perf_counter() - t0) * 1e3)
 
-    def _prepare_flow(self, color: Any, info: Any) -> None:
-        """The optical flow for a colour image whose depth partner has not arrived yet (the
-        tracker's :meth:`~endeff_ros.core.tracker.Tracker.flow`), for :meth:`_process`."""
+    def _prepare_flow(self, color: Any, info: Any) -> bool:
+        """The optical flow for a colour image, computed before its set is complete (the
+        tracker's :meth:`~endeff_ros.core.tracker.Tracker.flow`), for :meth:`_process`; True if
+        it was computed."""
         flow_fn = getattr(self.tracker, 'flow', None)
         with self._lock:
             if flow_fn is None or self._params_pending is not None or self._reset_pending:
-                return
+                return False
         t0 = time.perf_counter()
         try:
             array = convert.color_image_to_array(color)
-            flow = flow_fn(array, convert.camera_info_to_intrinsics(info))
+            with self._tracker_lock:  # the flow reads the tracks and the previous image
+                updates = self._updates
+                flow = flow_fn(array, convert.camera_info_to_intrinsics(info))
         except InputError:
-            return  # _process reports it when the set comes
+            return False  # _process reports it when the set comes
         self._prepared_flow = _Early(convert.stamp_to_ns(color.header.stamp), array, flow,
-                                     self.tracker.params, (time.perf_counter() - t0) * 1e3)
+                                     self.tracker.params, (time.perf_counter() - t0) * 1e3,
+                                     updates)
+        return True
 
     def _process(self, msgs: dict[str, Any], receipt: float) -> None:
         with self._lock:
             if self._params_pending is not None:
                 self.tracker.params, self._params_pending = self._params_pending, None
             if self._reset_pending:
-                self.tracker.reset()
+                with self._tracker_lock:
+                    self.tracker.reset()
+                    self._updates += 1
                 self._reset_pending = False
                 self.stats.resets += 1
                 self._prepared = self._prepared_flow = None
@@ -357,8 +392,8 @@ class EndeffNode(Node):
         early_flow, self._prepared_flow = self._prepared_flow, None
         params = self.tracker.params
         early = early if early and early.fits(depth, params) else None
-        early_flow = early_flow if early_flow and early_flow.fits(msgs.get('color'), params) \
-            else None
+        early_flow = early_flow if (early_flow and early_flow.fits(msgs.get('color'), params)
+                                    and early_flow.updates == self._updates) else None
         try:
             frame = _frame(msgs, early, early_flow)
         except InputError as exc:
@@ -371,11 +406,14 @@ class EndeffNode(Node):
             if not np.isfinite(frame.depth).any():
                 msg = f'depth image {frame.stamp_ns} ns has no valid reading (all 0 or NaN)'
                 raise InputError(msg)
-            if early is None and early_flow is None:
-                result = self.tracker.update(frame)
-            else:
-                result = self.tracker.update(frame, estimate=early and early.result,
-                                             flow=early_flow and early_flow.result)
+            with self._tracker_lock:
+                self._updates += 1
+                if early is None and early_flow is None:
+                    result = self.tracker.update(frame)
+                else:
+                    result = self.tracker.update(frame, estimate=early and early.result,
+                                                 flow=early_flow and early_flow.result)
+            if early is not None or early_flow is not None:
                 self.stats.prepared += early is not None
                 self.stats.prepared_flow += bool(early_flow and early_flow.result is not None)
         except InputError as exc:

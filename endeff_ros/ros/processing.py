@@ -182,6 +182,9 @@ class NodeStats:
     processed: int = 0
     prepared: int = 0  # sets whose Sections 3-4 ran early, while the colour image was awaited
     prepared_flow: int = 0  # sets whose optical flow ran early, while the depth was awaited
+    #: colour images whose flow ran in the subscription callback, alongside the worker's early
+    #: Sections 3-4 of their depth partner
+    flow_alongside: int = 0
     colorless: int = 0
     duplicates: int = 0
     published_empty: int = 0
@@ -204,6 +207,7 @@ class NodeStats:
         return {
             'received': dict(self.received), 'sets': sets, 'processed': self.processed,
             'prepared': self.prepared, 'prepared_flow': self.prepared_flow,
+            'flow_alongside': self.flow_alongside,
             'colorless': self.colorless, 'duplicates': self.duplicates,
             'skipped': skipped, 'dropped_unpaired': dict(dropped),
             'published_empty': self.published_empty, 'bad_input': self.bad_input,
