@@ -8,7 +8,7 @@ nearest sample per pixel, which gives a depth image with self-occlusion.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -19,24 +19,39 @@ K640 = Intrinsics(525.0, 525.0, 319.5, 239.5, 640, 480)
 
 @dataclass
 class Scene:
+    """Surface samples (world frame) with their outward unit normals, and the known tips."""
+
     samples: list[np.ndarray]
     tips: list[np.ndarray]
+    normals: list[np.ndarray] = field(default_factory=list)  # one array per samples array
+
+    def _add(self, points, normals):
+        self.samples.append(points)
+        self.normals.append(normals)
 
     def add_capsule(self, a, b, r, rng, density=2.5e5):
+        """Surface samples of a capsule (segment ``a``-``b``, radius ``r``), uniform by area:
+        the cylinder gets its share 2πrL and the two hemispherical caps theirs 4πr² (a short
+        wide capsule such as the head is mostly caps)."""
         a, b = np.asarray(a, float), np.asarray(b, float)
         axis = b - a
         length = np.linalg.norm(axis)
-        area = 2 * np.pi * r * length + 4 * np.pi * r * r
-        n = int(area * density)
-        t = rng.random(n)
+        side, caps = 2 * np.pi * r * length, 4 * np.pi * r * r
+        n = int((side + caps) * density)
         d = rng.normal(size=(n, 3))
         d /= np.linalg.norm(d, axis=1, keepdims=True)
-        if length > 0:
-            u = axis / length
-            d -= (d @ u)[:, None] * u * (t[:, None] > 0.02) * (t[:, None] < 0.98)
-            d /= np.linalg.norm(d, axis=1, keepdims=True)
-        centre = a + t[:, None] * axis
-        self.samples.append(centre + r * d)
+        if length == 0:
+            self._add(a + r * d, d)
+            return
+        u = axis / length
+        on_side = rng.random(n) < side / (side + caps)
+        along = d @ u
+        # Cylinder: any point of the segment, direction perpendicular to the axis; caps: the
+        # hemisphere at a (directions pointing back along u) or at b.
+        t = np.where(on_side, rng.random(n), (along > 0).astype(float))
+        d[on_side] -= along[on_side, None] * u
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        self._add(a + t[:, None] * axis + r * d, d)
 
     def add_box(self, lo, hi, rng, density=2.5e5):
         lo, hi = np.asarray(lo, float), np.asarray(hi, float)
@@ -47,12 +62,32 @@ class Scene:
         face = rng.integers(0, 6, n)
         axis = face % 3
         p[np.arange(n), axis] = np.where(face < 3, lo[axis], hi[axis])
-        self.samples.append(p)
+        normals = np.zeros((n, 3))
+        normals[np.arange(n), axis] = np.where(face < 3, -1.0, 1.0)
+        self._add(p, normals)
 
     def add_floor(self, rng, density=6e4, z=(0.5, 4.5), x=(-2.5, 2.5)):
         n = int((z[1] - z[0]) * (x[1] - x[0]) * density)
         p = np.stack([rng.uniform(*x, n), np.zeros(n), rng.uniform(*z, n)], axis=1)
-        self.samples.append(p)
+        self._add(p, np.tile([0.0, 1.0, 0.0], (n, 1)))
+
+    def __add__(self, other):
+        return Scene(self.samples + other.samples, self.tips + other.tips,
+                     self.normals + other.normals)
+
+
+def rotate_about_camera(scene, rotation, camera_height):
+    """The scene moved by ``rotation`` about the optical centre (optical frame), i.e. the
+    same scene seen by a camera turned by the inverse rotation."""
+
+    def move(p):
+        return to_optical(to_optical(p, camera_height) @ rotation.T, camera_height)
+
+    def turn(n):  # directions: the y flip of to_optical without the offset
+        return to_optical(to_optical(n, 0.0) @ rotation.T, 0.0)
+
+    return Scene([move(s) for s in scene.samples], [move(t)[0] for t in scene.tips],
+                 [turn(n) for n in scene.normals])
 
 
 def to_optical(p_world, camera_height):
@@ -62,10 +97,13 @@ def to_optical(p_world, camera_height):
 
 
 def render(scene: Scene, *, camera_height=1.1, intrinsics=K640, noise=0.0, seed=0):
-    """Z-buffer the scene samples into a float32 depth image (NaN = no reading)."""
+    """Z-buffer the scene samples into a float32 depth image (NaN = no reading). Samples on
+    surfaces facing away from the camera are dropped first (back-face culling), so a sparse
+    front never lets the back of a body show through."""
     rng = np.random.default_rng(seed)
     pts = to_optical(np.concatenate(scene.samples), camera_height)
-    pts = pts[pts[:, 2] > 0.1]
+    normals = to_optical(np.concatenate(scene.normals), 0.0)
+    pts = pts[(pts[:, 2] > 0.1) & (np.einsum('ij,ij->i', pts, normals) < 0)]
     u = np.round(intrinsics.fx * pts[:, 0] / pts[:, 2] + intrinsics.cx).astype(int)
     v = np.round(intrinsics.fy * pts[:, 1] / pts[:, 2] + intrinsics.cy).astype(int)
     ok = (u >= 0) & (u < intrinsics.width) & (v >= 0) & (v < intrinsics.height)
@@ -115,7 +153,7 @@ def person(pose='t_pose', *, x=0.0, z=2.8, yaw=0.0, seed=0, floor=True) -> Scene
         s.tips.append(w(hand))
     s.tips.insert(0, head)
     for side in (-1, 1):
-        s.tips.append(w([0.15 * side, 0.05, -0.065]))
+        s.tips.append(w([0.15 * side, 0.05, -0.15]))  # the toe end, as a hand's tip is its end
     if floor:
         s.add_floor(rng)
     return s

@@ -41,14 +41,7 @@ def as_set(points, decimals=9):
     return {tuple(np.round(p, decimals)) for p in np.asarray(points)}
 
 
-def rotate_about_camera(scene, rotation, camera_height):
-    """The scene moved by ``rotation`` about the optical centre (optical frame), i.e. the
-    same scene seen by a camera turned by the inverse rotation."""
-
-    def move(p):
-        return shapes.to_optical(shapes.to_optical(p, camera_height) @ rotation.T, camera_height)
-
-    return shapes.Scene([move(s) for s in scene.samples], [move(t)[0] for t in scene.tips])
+rotate_about_camera = shapes.rotate_about_camera
 
 
 def scene_points(scene, camera_height=1.1):

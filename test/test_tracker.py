@@ -115,7 +115,7 @@ TOUCH_T = 8
 
 @functools.cache
 def touch_run() -> Run:
-    return run(touch_torso(n_move=6), EndeffParams(keep_frames=TOUCH_T))
+    return run(touch_torso(n_move=6, n_hold=5), EndeffParams(keep_frames=TOUCH_T))
 
 
 def _touch_lost_span(r: Run) -> list[int]:
@@ -356,7 +356,7 @@ def test_track_state_age_confidence():
     keep = 4
     r = run(star_limb_vanishes(5, 7), EndeffParams(keep_frames=keep, max_rectify_distance=REACH),
             single=False)
-    people = run(hand_to_side(3, 8), EndeffParams(keep_frames=keep), single=False)
+    people = run(hand_to_side(5, 8), EndeffParams(keep_frames=keep), single=False)
     for rr in (r, people):
         for i, res in enumerate(rr.results):
             for t in res.tracks:
