@@ -40,6 +40,7 @@ from endeff_ros.bag.reader import (
 )
 from endeff_ros.cli import load_params_option
 from endeff_ros.core.errors import InputError
+from endeff_ros.core.types import Track
 from endeff_ros.scoring import (
     MATCH_THRESHOLD_M,
     MethodScore,
@@ -96,11 +97,11 @@ def _positions(tracks: Sequence[Any]) -> npt.NDArray[np.float64]:
 
 
 def _predicted_unmatched(tracks: Sequence[Any], score: FrameScore) -> int:
-    """Tracks left unmatched by ``score`` (false positives) whose state is predicted (1);
+    """Tracks left unmatched by ``score`` (false positives) whose state is predicted;
     tracks without a ``state`` (a custom tracker's) count as detections."""
     matched = set(score.matches[:, 0].tolist())
     return sum(1 for k, t in enumerate(tracks)
-               if k not in matched and getattr(t, 'state', 0) == 1)
+               if k not in matched and getattr(t, 'state', Track.DETECTED) == Track.PREDICTED)
 
 
 @dataclass

@@ -12,9 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from endeff_ros.core.types import Intrinsics
-
-K640 = Intrinsics(525.0, 525.0, 319.5, 239.5, 640, 480)
+from endeff_ros.core.types import KINECT_640 as K640
 
 
 @dataclass

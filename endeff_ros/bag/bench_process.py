@@ -60,7 +60,7 @@ def _boxes_frames(n: int, width: int = 640, height: int = 480
 
 def _source_frames(n: int) -> tuple[str, list[tuple[int, Any, Any]], Any]:
     """(description, [(stamp, colour RGB, depth m)], intrinsics) of ``n`` 640x480 frames."""
-    from endeff_ros.core.types import Intrinsics
+    from endeff_ros.core.types import KINECT_640
 
     try:
         from endeff_ros.synth import render_sequence
@@ -78,7 +78,7 @@ def _source_frames(n: int) -> tuple[str, list[tuple[int, Any, Any]], Any]:
             return f'synth jumping_jacks ({len(frames)} frames)', frames, intr
     except ImportError:
         pass
-    intr = Intrinsics(525.0, 525.0, 319.5, 239.5, 640, 480)
+    intr = KINECT_640
     return 'moving boxes', list(_boxes_frames(n)), intr
 
 

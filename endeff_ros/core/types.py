@@ -59,6 +59,11 @@ class Intrinsics:
         return np.stack([self.fx * p[:, 0] / z + self.cx, self.fy * p[:, 1] / z + self.cy], 1)
 
 
+#: A Kinect/RealSense-class 640x480 depth camera (fx = fy = 525, principal point at the
+#: image centre): the synthetic data's camera and the node's warm-up frames.
+KINECT_640 = Intrinsics(525.0, 525.0, 319.5, 239.5, 640, 480)
+
+
 @dataclass(frozen=True)
 class RGBDFrame:
     """One synchronised RGB-D frame.

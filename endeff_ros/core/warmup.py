@@ -4,7 +4,8 @@ The first frame a fresh process handles costs several times a later one: first c
 scipy and OpenCV, the optical-flow object's first run and the first large allocations. In the
 node, measured with ``python -m endeff_ros.ros.latency_bench`` (30 Hz), the first frame took
 48 ms and the second's optical flow 9 ms, so a live camera's first frames arrived while the
-worker was busy and were skipped (1-2 dropped frames per run, always frames 0-1). The node
+worker was busy and were skipped (1-2 dropped frames per run: frames 0-1 in the runs
+checked). The node
 pays this before it subscribes instead.
 """
 
@@ -14,16 +15,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from endeff_ros.core.types import Intrinsics, RGBDFrame
+from endeff_ros.core.types import KINECT_640, Intrinsics, RGBDFrame
 
 if TYPE_CHECKING:
     from endeff_ros.core.tracker import Tracker
 
-#: A Kinect-like 640x480 camera (the usual input size).
-WARM_UP_INTRINSICS = Intrinsics(525.0, 525.0, 319.5, 239.5, 640, 480)
-
-
-def warm_up_frames(intrinsics: Intrinsics = WARM_UP_INTRINSICS,
+def warm_up_frames(intrinsics: Intrinsics = KINECT_640,
                    shift_px: int = 3) -> list[RGBDFrame]:
     """Two RGB-D frames of a star (a disc with four limbs) 2 m away on no background; the
     second is the first moved ``shift_px`` pixels to the right, colour texture included, so
@@ -40,13 +37,13 @@ def warm_up_frames(intrinsics: Intrinsics = WARM_UP_INTRINSICS,
         body = du ** 2 + dv ** 2 < (40 * scale) ** 2
         limbs = ((np.abs(du) < 10 * scale) & (np.abs(dv) < 150 * scale)) | (
             (np.abs(dv) < 10 * scale) & (np.abs(du) < 150 * scale))
-        depth = np.where(body | limbs, np.float32(2.0), np.float32(np.nan)).astype(np.float32)
+        depth = np.where(body | limbs, np.float32(2.0), np.float32(np.nan))
         color = np.ascontiguousarray(texture[:, shift_px - k * shift_px:][:, :w])
         frames.append(RGBDFrame(k * 33_333_333, 'warm_up', depth, intrinsics, color))
     return frames
 
 
-def warm_up(tracker: Tracker, intrinsics: Intrinsics = WARM_UP_INTRINSICS) -> int:
+def warm_up(tracker: Tracker, intrinsics: Intrinsics = KINECT_640) -> int:
     """Run ``tracker`` over :func:`warm_up_frames`, then reset it (no track, id, floor or
     previous frame is kept). Returns the number of end-effectors of the last frame."""
     try:

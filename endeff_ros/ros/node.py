@@ -413,9 +413,8 @@ class EndeffNode(Node):
                 else:
                     result = self.tracker.update(frame, estimate=early and early.result,
                                                  flow=early_flow and early_flow.result)
-            if early is not None or early_flow is not None:
-                self.stats.prepared += early is not None
-                self.stats.prepared_flow += bool(early_flow and early_flow.result is not None)
+            self.stats.prepared += early is not None
+            self.stats.prepared_flow += bool(early_flow and early_flow.result is not None)
         except InputError as exc:
             text = f'no end-effectors in frame (publishing an empty cloud): {exc}'
             self.stats.warn('empty_frame', text)

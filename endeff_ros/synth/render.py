@@ -13,7 +13,7 @@ from functools import lru_cache
 import numpy as np
 import numpy.typing as npt
 
-from ..core.types import Intrinsics
+from ..core.types import KINECT_640, Intrinsics
 from .body import Entity
 from .shapes import Primitive, Vec
 
@@ -50,7 +50,7 @@ class Camera:
 
 def default_camera() -> Camera:
     """640x480, fx = fy = 525, principal point at the image centre."""
-    return Camera(Intrinsics(525.0, 525.0, 319.5, 239.5, 640, 480))
+    return Camera(KINECT_640)
 
 
 @lru_cache(maxsize=4)
