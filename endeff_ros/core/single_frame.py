@@ -119,6 +119,9 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
         root_node = int(subband[seed])
         found += [(e, *f) for f in find_end_effectors(graph, root_node,
                                                        min_geodesic=params.min_geodesic,
+                                                       chain_geodesic=params.chain_geodesic,
+                                                       chain_subbands=params.chain_subbands,
+                                                       chain_min_points=params.subband_min_points,
                                                        max_count=params.max_end_effectors)]
     dist_root = [graph.dist[subband[seeds[e]], path] for e, _, path, _ in found]
     positions = _tip_positions(points, subband, graph, [f[2] for f in found], dist_root, params)
