@@ -767,6 +767,27 @@ def test_a_failed_chain_is_passed_over_for_a_farther_chain():
     assert [node for node, _, _ in found][3:] == [leaves['twig']]
 
 
+def test_a_chain_end_is_a_local_maximum_of_the_root_distance():
+    """The twig's end linked (by a 0.57 m edge) to arm a 0.5 m from the root: still 0.27 m
+    from the found paths, but a neighbour lies farther from the root, so it is a point between
+    paths, not an end."""
+    g, leaves = _chain_graph(3)
+    edges = [*zip(*np.triu(g.dense_weights).nonzero())]
+    arm_a = 5  # node 5 is 0.5 m up arm a
+    assert np.allclose(g.centroids[arm_a], [0.0, 0.5, 0.0], atol=1e-9)
+    g = make_graph(g.centroids, [*edges, (leaves['twig'], arm_a)])
+    found = find_end_effectors(g, 0, min_geodesic=0.3, max_count=12, chain_geodesic=0.25)
+    assert leaves['twig'] not in [node for node, _, _ in found]
+
+
+@pytest.mark.parametrize('min_points, found_twig', [(1, True), (2, False)])
+def test_a_chain_ends_in_a_full_sub_band(min_points, found_twig):
+    g, leaves = _chain_graph(3)  # every node of the test graph holds one point
+    found = find_end_effectors(g, 0, min_geodesic=0.3, max_count=12, chain_geodesic=0.25,
+                               chain_min_points=min_points)
+    assert (leaves['twig'] in [node for node, _, _ in found]) == found_twig
+
+
 def test_t_pose_head_is_found_as_a_chain_below_g():
     """The T-pose person's head protrudes less than g from the hands' paths (they cross the top
     of the torso); the chain rule finds it, g alone does not."""

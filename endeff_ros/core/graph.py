@@ -7,7 +7,8 @@
 - End-effectors are found by iterated Dijkstra (Baak et al.): the farthest node from the
   target set is an end-effector; its path is joined to the target set by zero-weight edges
   (equivalently, all of its nodes become sources), and the search repeats until the farthest
-  node is closer than g.
+  node is closer than g, or, between ``chain_geodesic`` and g, no extreme ends a chain (see
+  :func:`find_end_effectors`).
 """
 
 from __future__ import annotations
