@@ -117,7 +117,7 @@ class SequenceResult:
     stats: dict[str, Any] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
     input_errors: dict[str, int] = field(default_factory=dict)
-    #: Temporal false positives that were predicted tracks (state 1), not detections.
+    #: Temporal false positives that were predicted tracks (Track.PREDICTED), not detections.
     predicted_false_positives: int = 0
 
     @property

@@ -720,12 +720,17 @@ def test_find_end_effectors_stops_below_g(min_geodesic, max_count, expected):
         assert protrusions[-1] == pytest.approx(0.2)  # from the middle of arm a
 
 
+def _edges(g):
+    """The (i, j) node pairs joined by an edge of ``g``, each once."""
+    return list(zip(*np.triu(g.dense_weights).nonzero()))
+
+
 def _chain_graph(twig_nodes):
     """The Y graph's arms a, b, c plus a 0.27 m twig off the root made of ``twig_nodes`` edges:
     a chain of short edges (a limb crossing bands) or one long edge (a large sub-band)."""
     g, leaves = _y_graph()
     centroids = list(g.centroids)
-    edges = list(zip(*np.triu(g.dense_weights).nonzero()))
+    edges = _edges(g)
     prev = 0
     for step in range(1, twig_nodes + 1):
         centroids.append(np.array([0.0, 0.0, 0.27 * step / twig_nodes]))
@@ -761,8 +766,7 @@ def test_a_failed_chain_is_passed_over_for_a_farther_chain():
     chain is found."""
     g, leaves = _chain_graph(3)
     centroids = list(g.centroids) + [np.array([0.0, 0.0, -0.29])]
-    edges = [*zip(*np.triu(g.dense_weights).nonzero()), (0, len(centroids) - 1)]
-    g = make_graph(centroids, edges)
+    g = make_graph(centroids, [*_edges(g), (0, len(centroids) - 1)])
     found = find_end_effectors(g, 0, min_geodesic=0.3, max_count=12, chain_geodesic=0.25)
     assert [node for node, _, _ in found][3:] == [leaves['twig']]
 
@@ -772,10 +776,9 @@ def test_a_chain_end_is_a_local_maximum_of_the_root_distance():
     from the found paths, but a neighbour lies farther from the root, so it is a point between
     paths, not an end."""
     g, leaves = _chain_graph(3)
-    edges = [*zip(*np.triu(g.dense_weights).nonzero())]
     arm_a = 5  # node 5 is 0.5 m up arm a
     assert np.allclose(g.centroids[arm_a], [0.0, 0.5, 0.0], atol=1e-9)
-    g = make_graph(g.centroids, [*edges, (leaves['twig'], arm_a)])
+    g = make_graph(g.centroids, [*_edges(g), (leaves['twig'], arm_a)])
     found = find_end_effectors(g, 0, min_geodesic=0.3, max_count=12, chain_geodesic=0.25)
     assert leaves['twig'] not in [node for node, _, _ in found]
 

@@ -5,8 +5,7 @@ scipy and OpenCV, the optical-flow object's first run and the first large alloca
 node, measured with ``python -m endeff_ros.ros.latency_bench`` (30 Hz), the first frame took
 48 ms and the second's optical flow 9 ms, so a live camera's first frames arrived while the
 worker was busy and were skipped (1-2 dropped frames per run: frames 0-1 in the runs
-checked). The node
-pays this before it subscribes instead.
+checked). The node pays this before it subscribes instead.
 """
 
 from __future__ import annotations
@@ -19,6 +18,7 @@ from endeff_ros.core.types import KINECT_640, Intrinsics, RGBDFrame
 
 if TYPE_CHECKING:
     from endeff_ros.core.tracker import Tracker
+
 
 def warm_up_frames(intrinsics: Intrinsics = KINECT_640,
                    shift_px: int = 3) -> list[RGBDFrame]:
