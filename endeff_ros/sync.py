@@ -10,7 +10,10 @@ each from its queue) with the smallest stamp spread that contains no message old
 already emitted set and whose spread is within ``slop``. To keep latency bounded it emits as soon
 as every input has a message that pairs within ``slop`` with the *oldest* pivot candidate, and
 it drops messages that can no longer pair (older than the last emitted set or pushed out of a
-full queue). Every dropped message is counted per input.
+full queue). Every dropped message is counted per input and, when ``on_drop`` is given, handed
+to it with the reason (one of :data:`DROP_REASONS`), so that a caller who must account for every
+message (the bag reader yields depth images without a colour partner) learns exactly which
+messages left the queues unpaired instead of inferring it from counters.
 """
 
 from __future__ import annotations
@@ -19,6 +22,14 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
+
+#: Why a message left the synchroniser without being part of an emitted set.
+LATE = 'late'            # not newer than the newest message of the last emitted set
+OVERFLOW = 'overflow'    # pushed out of a full queue
+UNPAIRED = 'unpaired'    # the oldest head, and every other input's messages are beyond slop
+SKIPPED = 'skipped'      # older than the message chosen from its input for an emitted set
+FLUSHED = 'flushed'      # still queued when :meth:`ApproximateTimeSynchronizer.flush` ran
+DROP_REASONS = (LATE, OVERFLOW, UNPAIRED, SKIPPED, FLUSHED)
 
 
 @dataclass
@@ -34,12 +45,14 @@ class ApproximateTimeSynchronizer:
 
     Inputs that are optional for a set (e.g. camera info, which may arrive less often) are
     named in ``latched``: the newest message seen on such an input is reused for every set and
-    never counted as dropped.
+    never counted as dropped. ``on_drop(index, stamp_ns, msg, reason)`` is called for every
+    message of a non-latched input that is dropped, at the moment it is dropped.
     """
 
     def __init__(self, n_inputs: int, queue_size: int, slop_ns: int,
                  callback: Callable[..., Any] | None = None, *,
-                 latched: tuple[int, ...] = ()) -> None:
+                 latched: tuple[int, ...] = (),
+                 on_drop: Callable[[int, int, Any, str], Any] | None = None) -> None:
         if n_inputs < 1 or queue_size < 1 or slop_ns < 0:
             msg = (f'synchroniser needs n_inputs >= 1, queue_size >= 1, slop >= 0 '
                    f'(got {n_inputs}, {queue_size}, {slop_ns})')
@@ -55,6 +68,7 @@ class ApproximateTimeSynchronizer:
         self.queue_size = queue_size
         self.slop_ns = slop_ns
         self.callback = callback
+        self.on_drop = on_drop
         self.latched = frozenset(latched)
         self._queues: list[deque[tuple[int, Any]]] = [deque() for _ in range(n_inputs)]
         self._latest: dict[int, Any] = {}
@@ -71,7 +85,7 @@ class ApproximateTimeSynchronizer:
             return self._drain()
         queue = self._queues[index]
         if self._last_emitted_ns is not None and stamp_ns <= self._last_emitted_ns:
-            self.stats.dropped[index] += 1
+            self._drop(index, (stamp_ns, msg), LATE)
             return []
         queue.append((stamp_ns, msg))
         if len(queue) > 1 and queue[-2][0] > stamp_ns:
@@ -79,9 +93,19 @@ class ApproximateTimeSynchronizer:
             queue.clear()
             queue.extend(items)
         while len(queue) > self.queue_size:
-            queue.popleft()
-            self.stats.dropped[index] += 1
+            self._drop(index, queue.popleft(), OVERFLOW)
         return self._drain()
+
+    def flush(self) -> None:
+        """Drop every queued message (reason ``flushed``), oldest first, e.g. at end of input."""
+        for index, queue in enumerate(self._queues):
+            while queue:
+                self._drop(index, queue.popleft(), FLUSHED)
+
+    def _drop(self, index: int, item: tuple[int, Any], reason: str) -> None:
+        self.stats.dropped[index] += 1
+        if self.on_drop is not None:
+            self.on_drop(index, item[0], item[1], reason)
 
     def _drain(self) -> list[tuple[Any, ...]]:
         out = []
@@ -115,8 +139,8 @@ class ApproximateTimeSynchronizer:
                 if abs(best[0] - pivot_ns) > self.slop_ns:
                     if all(item[0] > pivot_ns + self.slop_ns for item in self._queues[i]):
                         # Nothing on input i will ever pair with the pivot: drop it.
-                        self._queues[pivot_stream].popleft()
-                        self.stats.dropped[pivot_stream] += 1
+                        self._drop(pivot_stream, self._queues[pivot_stream].popleft(),
+                                   UNPAIRED)
                         chosen = None
                         break
                     return None
@@ -126,15 +150,13 @@ class ApproximateTimeSynchronizer:
         for i, item in chosen.items():
             queue = self._queues[i]
             while queue and queue[0] is not item:
-                queue.popleft()
-                self.stats.dropped[i] += 1
+                self._drop(i, queue.popleft(), SKIPPED)
             queue.popleft()
         self._last_emitted_ns = newest
         for i in streams:
             queue = self._queues[i]
             while queue and queue[0][0] <= newest:
-                queue.popleft()
-                self.stats.dropped[i] += 1
+                self._drop(i, queue.popleft(), LATE)
         self.stats.emitted += 1
         return tuple(chosen[i][1] if i in chosen else self._latest[i]
                      for i in range(self.n_inputs))

@@ -186,3 +186,26 @@ def test_bad_input_index() -> None:
     for index in (2, -1):
         with pytest.raises(IndexError, match='out of range'):
             sync.add(index, 0, 'x')
+
+
+def test_on_drop_reports_each_dropped_message_with_its_reason() -> None:
+    """Every drop the counters see is handed to ``on_drop`` once, with why it happened."""
+    from endeff_ros.sync import FLUSHED, LATE, OVERFLOW, UNPAIRED
+
+    drops: list[tuple[int, int, object, str]] = []
+    sync = ApproximateTimeSynchronizer(2, 3, 5 * MS, on_drop=lambda *d: drops.append(d))
+    for k in range(5):  # rgb 0, 1 pushed out of the queue of 3
+        sync.add(0, k * PERIOD, f'rgb{k}')
+    assert drops == [(0, 0, 'rgb0', OVERFLOW), (0, PERIOD, 'rgb1', OVERFLOW)]
+    drops.clear()
+    sync.add(1, 3 * PERIOD, 'depth3')  # pairs with rgb3; rgb2 has no depth within the slop
+    assert drops == [(0, 2 * PERIOD, 'rgb2', UNPAIRED)]
+    drops.clear()
+    sync.add(1, 2 * PERIOD, 'depth2')  # older than the emitted set
+    sync.add(1, 6 * PERIOD, 'depth6')  # rgb4 can no longer pair: depth is beyond the slop
+    sync.add(1, 7 * PERIOD, 'depth7')
+    assert drops == [(1, 2 * PERIOD, 'depth2', LATE), (0, 4 * PERIOD, 'rgb4', UNPAIRED)]
+    drops.clear()
+    sync.flush()
+    assert drops == [(1, 6 * PERIOD, 'depth6', FLUSHED), (1, 7 * PERIOD, 'depth7', FLUSHED)]
+    assert sync.stats.dropped == [4, 3]

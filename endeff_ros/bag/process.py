@@ -39,7 +39,7 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
-from endeff_ros.cli import load_params_option
+from endeff_ros.cli_common import load_params_option
 from endeff_ros.core.errors import EndeffError, InputError
 
 from .errors import BagError

@@ -19,7 +19,6 @@ yielded, with ``color=None`` (the tracker falls back to predicting without optic
 
 from __future__ import annotations
 
-import bisect
 import heapq
 import itertools
 from dataclasses import dataclass, field
@@ -373,15 +372,26 @@ class BagReader:
         for topic in index:
             stats.messages[topic] = 0
             stats.dropped[topic] = 0
+        # Depth images the synchroniser dropped (no colour partner, queue overflow, late) are
+        # still frames: they are yielded colour-less, in stamp order with the emitted sets, as
+        # soon as the synchroniser gives up on them, so memory stays bounded by its queue.
+        gone: list[_Entry] = []
+
+        def on_drop(i: int, _stamp: int, item: Any, _reason: str) -> None:
+            if i == 1:
+                gone.append(item)
+            else:
+                stats.dropped[sel.color] += 1
+
         sync = ApproximateTimeSynchronizer(3, self.options.queue_size,
-                                           round(self.options.slop_s * 1e9), latched=(2,))
-        pending: list[_Entry] = []  # depth entries fed but not yet emitted or yielded
-        last_info: list[Any] = [None]
-        last_yielded = [-1]
-        colors_used = 0
+                                           round(self.options.slop_s * 1e9), latched=(2,),
+                                           on_drop=on_drop)
+        last_info: Any = None
+        last_yielded = -1
 
         def build(color: _Entry | None, depth: _Entry, info: Any) -> BagRecord | None:
-            if depth.stamp <= last_yielded[0] or info is None:
+            nonlocal last_yielded
+            if depth.stamp <= last_yielded or info is None:
                 stats.dropped[sel.depth] += 1
                 return None
             try:
@@ -395,44 +405,27 @@ class BagReader:
                 stats.gt_matched += 1
             stats.frames += 1
             stats.colorless += color is None
-            last_yielded[0] = depth.stamp
+            last_yielded = depth.stamp
             return BagRecord(frame, positions, depth.log_time)
 
-        # ``pending`` mirrors the synchroniser's depth queue (sorted by stamp): every depth
-        # message leaves that queue at its front, either in an emitted set or dropped (queue
-        # overflow, no colour partner, older than an emitted set). Dropped ones are yielded
-        # colour-less, so memory stays bounded by the queue size.
-        last_emitted: int | None = None
-        for entry in self._ordered(conns, priority):
-            stats.messages[entry.topic] += 1
-            i = index[entry.topic]
-            late = False
-            if i == 2:
-                last_info[0] = entry.msg
-            elif i == 1:
-                late = last_emitted is not None and entry.stamp <= last_emitted
-                if not late:
-                    bisect.insort(pending, entry, key=lambda e: e.stamp)
-            before = sync.stats.dropped[1]
-            sets = sync.add(i, entry.stamp, entry if i < 2 else entry.msg)
-            removed = sync.stats.dropped[1] - before - late + len(sets)
-            gone, pending = pending[:removed], pending[removed:]
-            emitted = {id(depth): (color, info) for color, depth, info in sets}
-            for color, depth, _ in sets:
-                newest = max(color.stamp, depth.stamp)
-                last_emitted = newest if last_emitted is None else max(last_emitted, newest)
-            colors_used += len(sets)
-            if late:
-                gone.append(entry)
-            for d in sorted(gone, key=lambda e: e.stamp):
-                color, info = emitted.get(id(d), (None, last_info[0]))
+        def emit(sets: list[tuple[Any, ...]]) -> Iterator[BagRecord]:
+            partner = {id(depth): (color, info) for color, depth, info in sets}
+            ready = sorted([*gone, *(depth for _, depth, _ in sets)], key=lambda e: e.stamp)
+            gone.clear()
+            for d in ready:
+                color, info = partner.get(id(d), (None, last_info))
                 rec = build(color, d, info)
                 if rec is not None:
                     yield rec
-        for p in pending:
-            rec = build(None, p, last_info[0])
-            if rec is not None:
-                yield rec
+
+        for entry in self._ordered(conns, priority):
+            stats.messages[entry.topic] += 1
+            i = index[entry.topic]
+            if i == 2:
+                last_info = entry.msg
+            yield from emit(sync.add(i, entry.stamp, entry if i < 2 else entry.msg))
+        sync.flush()
+        yield from emit([])
         if stats.messages[sel.info] == 0:
             raise BagError(self.path, f'no camera info on {sel.info} (no intrinsics)')
         read = dict(stats.messages)
@@ -443,9 +436,6 @@ class BagReader:
             if got < want:
                 raise BagError(self.path, f'{topic}: the bag lists {want} messages but only '
                                           f'{got} could be read (truncated or corrupt file)')
-        # Colour images never paired (dropped by the synchroniser or left in its queue at the
-        # end); depth images without colour were yielded colour-less instead.
-        stats.dropped[sel.color] += stats.messages[sel.color] - colors_used
 
     def _read_gt(self, sel: TopicSelection) -> dict[int, npt.NDArray[np.float64]]:
         from endeff_ros.ros import convert
