@@ -7,8 +7,15 @@ the temporal :class:`~endeff_ros.core.tracker.Tracker` and to the single-frame
 :mod:`endeff_ros.scoring` (Section 6.1, Eqs. 10-12).
 
 Output: a table on stdout, optionally the JSON report (``--json``, the spec's form plus extra
-keys ``per_frame``, ``groups``, ``failed``...) and plots (``--plots``). Progress and the topic
-choice per bag go to stderr. Exit status 1 if any bag failed, else 0.
+keys ``per_frame``, ``groups``, ``kinds``, ``failed``...) and plots (``--plots``). Progress and
+the topic choice per bag go to stderr. Exit status 1 if any bag failed, else 0.
+
+Groups: the paper suite's named groups (``no_occlusion``, ``occlusion``, ``generic``), and one
+group per value of every attribute that bags record in their metadata
+(:mod:`endeff_ros.attributes`, e.g. ``view=side``, ``distance_m=2-3.5``). Kinds: for sequences
+of people (attribute ``people`` > 0, or a person sequence of the paper suite) the ground-truth
+ids are heads, hands and feet (id % 5, the contract's numbering), scored per kind
+(:meth:`~endeff_ros.scoring.SequenceScorer.kind_result`); other entities are kind ``other``.
 
 No ROS import: this runs without rclpy.
 """
@@ -29,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from endeff_ros.attributes import attribute_groups, custom_data, parse_attributes
 from endeff_ros.bag.errors import BagError
 from endeff_ros.bag.reader import (
     BagReader,
@@ -42,9 +50,12 @@ from endeff_ros.cli import load_params_option
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.types import Track
 from endeff_ros.scoring import (
+    KINDS,
     MATCH_THRESHOLD_M,
     MethodScore,
     SequenceScorer,
+    kinds_of_ids,
+    mean_kinds_over_sequences,
     mean_over_sequences,
     summary_dict,
 )
@@ -56,7 +67,7 @@ if TYPE_CHECKING:
 
     from endeff_ros.core.params import EndeffParams
     from endeff_ros.core.types import RGBDFrame
-    from endeff_ros.scoring import FrameScore
+    from endeff_ros.scoring import FrameScore, KindScore
 
     EstimateFn = Callable[[RGBDFrame, EndeffParams | None], Any]
     TrackerFactory = Callable[[EndeffParams | None], Any]
@@ -119,6 +130,11 @@ class SequenceResult:
     input_errors: dict[str, int] = field(default_factory=dict)
     #: Temporal false positives that were predicted tracks (Track.PREDICTED), not detections.
     predicted_false_positives: int = 0
+    #: Attributes from the bag's metadata (:mod:`endeff_ros.attributes`), ``{}`` if none.
+    attributes: dict[str, Any] = field(default_factory=dict)
+    attribute_warning: str | None = None
+    #: Whether the ground-truth ids are a person's (kinds head/hand/foot) or kind ``other``.
+    person: bool = False
 
     @property
     def frames(self) -> int:
@@ -134,6 +150,10 @@ class SequenceResult:
         """The sequence score of ``method`` ('temporal' or 'single_frame')."""
         return self.scorers[method].result()
 
+    def kind_scores(self, method: str) -> dict[str, KindScore]:
+        """Per end-effector kind of ``method``: recall and mean error."""
+        return self.scorers[method].kind_result()
+
     def to_json(self) -> dict[str, Any]:
         """The spec's sequence entry plus extra keys."""
         out: dict[str, Any] = {'bag': self.name, 'frames': self.frames,
@@ -142,6 +162,11 @@ class SequenceResult:
             out[m] = self.score(m).to_json()
         out['path'] = self.path
         out['topics'] = self.topics
+        out['attributes'] = dict(self.attributes)
+        if self.attribute_warning:
+            out['attribute_warning'] = self.attribute_warning
+        out['kinds'] = {m: {k: v.to_json() for k, v in self.kind_scores(m).items()}
+                        for m in METHODS}
         out['counts'] = {m: summary_dict(self.scorers[m]) for m in METHODS}
         out['counts']['temporal']['predicted_false_positives'] = self.predicted_false_positives
         out['estimator_input_errors'] = dict(self.input_errors)
@@ -182,6 +207,12 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
         res.topics = bag.selection.describe()
         if log:
             log(f'{res.name}: {res.topics}')
+        res.attributes, res.attribute_warning = parse_attributes(custom_data(bag.reader),
+                                                                 str(path))
+        if res.attribute_warning:
+            (log or _stderr)(f'warning: {res.attribute_warning}')
+        res.person = _is_person_sequence(res.name, res.attributes)
+        gt_ids = _gt_ids(bag)
         tracker = tracker_factory(params)
         it = bag.frames()
         while True:
@@ -209,8 +240,12 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
             res.seconds['read'] += t1 - t0
             res.seconds['temporal'] += t2 - t1
             res.seconds['single_frame'] += t3 - t2
+            kinds = None
+            if gt is not None and frame.stamp_ns in gt_ids:
+                ids = gt_ids[frame.stamp_ns]
+                kinds = kinds_of_ids(ids, person=res.person) if len(ids) == len(gt) else None
             for m in METHODS:
-                score = res.scorers[m].add(est[m], gt)
+                score = res.scorers[m].add(est[m], gt, kinds)
                 if score is not None:
                     res.recalls[m].append(score.recall)
                     if m == 'temporal':
@@ -222,6 +257,41 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
         raise BagError(path, 'no synchronised frames (colour, depth and camera info never '
                              'lined up)')
     return res
+
+
+def _is_person_sequence(name: str, attributes: dict[str, Any]) -> bool:
+    """People in view: the attribute ``people`` > 0, else a person sequence of the paper suite."""
+    people = attributes.get('people')
+    if isinstance(people, int | float) and not isinstance(people, bool):
+        return people > 0
+    try:
+        from endeff_ros.synth.sequences import PERSON_SEQUENCES
+    except Exception:  # the generator is optional for scoring
+        return False
+    return name.rsplit('/', 1)[-1] in PERSON_SEQUENCES
+
+
+def _gt_ids(bag: BagReader) -> dict[int, npt.NDArray[np.int64]]:
+    """Ground-truth ids per header stamp (ns), aligned with the positions the reader yields
+    (rows with non-finite positions dropped); ``{}`` when the cloud has no ``id`` field."""
+    from endeff_ros.ros import convert
+
+    sel = bag.selection
+    if sel is None or not sel.gt:
+        return {}
+    out: dict[int, npt.NDArray[np.int64]] = {}
+    conns = [c for c in bag.reader.connections if c.topic == sel.gt]
+    try:
+        for conn, _, raw in bag.reader.messages(connections=conns):
+            msg = bag.reader.deserialize(raw, conn.msgtype)
+            points = convert.cloud_to_array(msg)
+            if 'id' not in (points.dtype.names or ()):
+                return {}
+            finite = np.all(np.isfinite(convert.xyz(points)), axis=1)
+            out[convert.stamp_to_ns(msg.header.stamp)] = points['id'][finite].astype(np.int64)
+    except Exception:  # a broken cloud or storage: the frame reader reports it with context
+        return {}
+    return out
 
 
 def _unique_names(paths: Sequence[Path]) -> list[str]:
@@ -243,60 +313,129 @@ def _groups() -> dict[str, list[str]]:
     return {str(k): [str(s) for s in v] for k, v in dict(GROUPS).items()}
 
 
+def _group_entry(inside: Sequence[SequenceResult], attribute: str | None) -> dict[str, Any]:
+    """Means over the sequences of one group: the methods' scores and per-kind scores."""
+    entry: dict[str, Any] = {'sequences': [r.name for r in inside]}
+    if attribute is not None:
+        entry['attribute'] = attribute
+    for m in METHODS:
+        entry[m] = mean_over_sequences([r.score(m) for r in inside]).to_json()
+    entry['kinds'] = {m: {k: v.to_json() for k, v in mean_kinds_over_sequences(
+        [r.kind_scores(m) for r in inside]).items()} for m in METHODS}
+    return entry
+
+
 def build_report(results: Sequence[SequenceResult], failed: Sequence[tuple[str, str]] = (),
                  params: EndeffParams | None = None) -> dict[str, Any]:
-    """The JSON report: spec keys ``sequences`` and ``overall``, plus ``groups``, ``failed``."""
+    """The JSON report: spec keys ``sequences`` and ``overall``, plus ``groups`` (the paper
+    suite's named groups, then ``key=value`` per attribute value; an attribute group names its
+    ``attribute``), ``kinds`` (overall per kind), ``failed``."""
     report: dict[str, Any] = {'sequences': [r.to_json() for r in results]}
     report['overall'] = {m: mean_over_sequences([r.score(m) for r in results]).to_json()
                          for m in METHODS}
+    report['kinds'] = _group_entry(results, None)['kinds']
     groups = {}
     for gname, members in _groups().items():
         inside = [r for r in results if r.name.rsplit('/', 1)[-1] in members]
         if inside:
-            groups[gname] = {'sequences': [r.name for r in inside],
-                             **{m: mean_over_sequences([r.score(m) for r in inside]).to_json()
-                                for m in METHODS}}
+            groups[gname] = _group_entry(inside, None)
+    by_name = {r.name: r for r in results}
+    for key, labelled in attribute_groups([(r.name, r.attributes) for r in results]).items():
+        for gname, members in labelled.items():
+            groups[gname] = _group_entry([by_name[n] for n in members], key)
     report['groups'] = groups
     report['failed'] = [{'bag': b, 'error': e} for b, e in failed]
     report['match_threshold_m'] = MATCH_THRESHOLD_M
     report['conventions'] = ('recall/FPR: mean over scored frames; mean_error_m: mean over all '
-                             'true-positive pairs; overall/groups: mean over sequences; null: '
-                             'undefined (no ground truth points or no true positive)')
+                             'true-positive pairs; overall/groups: mean over sequences; kinds: '
+                             'recall = true positives / ground-truth points of that kind in a '
+                             'sequence, groups and overall the mean over the sequences having '
+                             'that kind; null: undefined (no ground truth points or no true '
+                             'positive)')
     if params is not None:
         report['params'] = params.to_dict()
     return report
 
 
+def _num(v: float | None, fmt: str) -> str:
+    return '-' if v is None else format(v, fmt)
+
+
 def format_table(report: dict[str, Any]) -> str:
-    """Plain-text table of the report."""
-    def num(v: float | None, fmt: str) -> str:
-        return '-' if v is None else format(v, fmt)
-
+    """Plain-text table of the report: sequences (with their split when attributes give one),
+    the paper suite's groups, one section per attribute, overall; then recall and mean error
+    per end-effector kind."""
     def cols(d: dict[str, Any]) -> str:
-        return (f'{num(d["recall"], ".3f"):>7} {num(d["mean_error_m"], ".3f"):>7} '
-                f'{num(d["fpr"], ".3f"):>7}')
+        return (f'{_num(d["recall"], ".3f"):>7} {_num(d["mean_error_m"], ".3f"):>7} '
+                f'{_num(d["fpr"], ".3f"):>7}')
 
-    rows = [r['bag'] for r in report['sequences']] + list(report['groups']) + ['overall']
+    seqs = report['sequences']
+    groups = report['groups']
+    splits = [str(s.get('attributes', {}).get('split', '')) for s in seqs]
+    split_w = max(6, *map(len, splits)) + 1 if any(splits) else 0
+    rows = [s['bag'] for s in seqs] + list(groups) + ['overall']
     width = max([len('sequence')] + [len(n) for n in rows]) + 2
-    head = (f'{"":{width}}{"":>7}{"":>7} | {"temporal":^23} | {"single-frame":^23}\n'
-            f'{"sequence":{width}}{"frames":>7}{"scored":>7} | '
-            f'{"recall":>7} {"err m":>7} {"FPR":>7} | {"recall":>7} {"err m":>7} {"FPR":>7}')
-    lines = [head, '-' * len(head.splitlines()[1])]
-    for r in report['sequences']:
-        lines.append(f'{r["bag"]:{width}}{r["frames"]:>7}{r["scored_frames"]:>7} | '
-                     f'{cols(r["temporal"])} | {cols(r["single_frame"])}')
-    if report['groups']:
-        lines.append('-' * len(lines[1]))
-        for g, d in report['groups'].items():
-            lines.append(f'{g:{width}}{"":>7}{len(d["sequences"]):>7} | '
+    pad = f'{"":{split_w}}'
+    head = (f'{"":{width}}{pad}{"":>7}{"":>7} | {"temporal":^23} | {"single-frame":^23}\n'
+            f'{"sequence":{width}}{"split" if split_w else "":{split_w}}{"frames":>7}'
+            f'{"scored":>7} | {"recall":>7} {"err m":>7} {"FPR":>7} | '
+            f'{"recall":>7} {"err m":>7} {"FPR":>7}')
+    rule = '-' * len(head.splitlines()[1])
+    lines = [head, rule]
+    for s, split in zip(seqs, splits, strict=True):
+        lines.append(f'{s["bag"]:{width}}{split:{split_w}}{s["frames"]:>7}'
+                     f'{s["scored_frames"]:>7} | {cols(s["temporal"])} | '
+                     f'{cols(s["single_frame"])}')
+    for section, names in _group_sections(groups):
+        lines.append(f'-- {section} ' + '-' * max(0, len(rule) - len(section) - 4))
+        for g in names:
+            d = groups[g]
+            lines.append(f'{g:{width}}{pad}{"":>7}{len(d["sequences"]):>7} | '
                          f'{cols(d["temporal"])} | {cols(d["single_frame"])}')
-    lines.append('-' * len(lines[1]))
+    lines.append(rule)
     o = report['overall']
-    lines.append(f'{"overall":{width}}{"":>7}{len(report["sequences"]):>7} | '
+    lines.append(f'{"overall":{width}}{pad}{"":>7}{len(seqs):>7} | '
                  f'{cols(o["temporal"])} | {cols(o["single_frame"])}')
+    kinds = _kind_table(report, width)
+    if kinds:
+        lines += ['', *kinds]
     for f in report.get('failed', []):
         lines.append(f'FAILED {f["bag"]}: {f["error"]}')
-    return '\n'.join(lines)
+    return '\n'.join(line.rstrip() for line in lines)
+
+
+def _group_sections(groups: dict[str, Any]) -> list[tuple[str, list[str]]]:
+    """``[(section title, group names)]``: the paper groups first, then one per attribute."""
+    sections: dict[str, list[str]] = {}
+    for g, d in groups.items():
+        attribute = d.get('attribute')
+        sections.setdefault(attribute or 'groups', []).append(g)
+    return list(sections.items())
+
+
+def _kind_table(report: dict[str, Any], width: int) -> list[str]:
+    """Recall and mean error per kind for overall and each group (empty without kinds)."""
+    rows = [('overall', report.get('kinds', {}))]
+    rows += [(g, d.get('kinds', {})) for g, d in report['groups'].items()]
+    kinds = [k for k in KINDS if any(k in d.get(m, {}) for _, d in rows for m in METHODS)]
+    if not kinds:
+        return []
+    cell = 14 * len(kinds)
+    head = (f'{"per kind":{width}} | {"temporal: recall / err m":^{cell}} | '
+            f'{"single-frame: recall / err m":^{cell}}\n{"":{width}} | '
+            + ' | '.join(''.join(f'{k:^14}' for k in kinds) for _ in METHODS))
+    lines = [head, '-' * len(head.splitlines()[1])]
+    for name, d in rows:
+        if not any(d.get(m) for m in METHODS):
+            continue
+        cells = []
+        for m in METHODS:
+            per = d.get(m, {})
+            cells.append(''.join(
+                f'{_num(per[k]["recall"], ".3f"):>7}{_num(per[k]["mean_error_m"], ".3f"):>7}'
+                if k in per else f'{"":14}' for k in kinds))
+        lines.append(f'{name:{width}} | ' + ' | '.join(cells))
+    return lines
 
 
 def write_plots(report: dict[str, Any], out_dir: str | Path) -> list[Path]:

@@ -20,6 +20,13 @@ Conventions for cases the paper does not cover (documented in the report, never 
 - a sequence without any TP has no mean error (``nan``; ``None`` in JSON); a sequence without
   scored frames has no recall and no FPR; undefined values are left out of the overall means.
 
+Per end-effector kind (head, hand, foot of a person; ``other`` for any other entity), the
+recall of a kind is the number of its ground-truth points matched as TPs over all of its
+ground-truth points (pooled over the frames of a sequence, since a kind has at most a few
+points per frame), and its mean error the mean over those TP pairs. The matching is the same
+one-to-one matching over all kinds as above, so a kind's recall never counts an estimate that
+the frame's Hungarian assignment gave to another point.
+
 References
 ----------
 Lin, Pardàs & Casas, *Time-consistent estimation of end-effectors from RGB-D data*, 2016,
@@ -42,6 +49,24 @@ if TYPE_CHECKING:
 
 MATCH_THRESHOLD_M = 0.15
 """A Hungarian match within this distance (metres) is a true positive (Section 6.1)."""
+
+PERSON_KINDS = ('head', 'hand', 'hand', 'foot', 'foot')
+"""Kind of a person's ground-truth id ``i`` is ``PERSON_KINDS[i % 5]`` (ids 0 head, 1 left hand,
+2 right hand, 3 left foot, 4 right foot, +5 per further person: the benchmark-bag contract)."""
+KINDS = ('head', 'hand', 'foot', 'other')
+"""Every kind reported, in report order."""
+
+
+def kinds_of_ids(ids: npt.ArrayLike, *, person: bool) -> npt.NDArray[np.str_]:
+    """(N,) kind names of ground-truth ids: :data:`PERSON_KINDS` by ``id % 5`` when the
+    sequence shows people (``person``), else ``'other'`` for every id."""
+    arr = np.asarray(ids).reshape(-1)
+    if not person:
+        return np.full(arr.shape, 'other')
+    if arr.size and (not np.issubdtype(arr.dtype, np.integer) or arr.min() < 0):
+        msg = f'ground-truth ids must be non-negative integers, got {arr[:5].tolist()}'
+        raise ValueError(msg)
+    return np.asarray(PERSON_KINDS)[arr.astype(np.int64) % len(PERSON_KINDS)]
 
 
 def _as_points(points: npt.ArrayLike | None, what: str) -> npt.NDArray[np.float64]:
@@ -132,6 +157,26 @@ class MethodScore:
                 'fpr': _json_float(self.fpr)}
 
 
+def _kind_key(kind: str) -> tuple[int, str]:
+    """Sort key: the kinds of :data:`KINDS` in that order, unknown names after them."""
+    return (KINDS.index(kind) if kind in KINDS else len(KINDS), kind)
+
+
+@dataclass(frozen=True)
+class KindScore:
+    """One kind's recall (TPs / ground-truth points of that kind) and mean TP error (m)."""
+
+    recall: float
+    mean_error_m: float
+    gt_points: int
+    tp: int
+
+    def to_json(self) -> dict[str, float | int | None]:
+        """``{"recall", "mean_error_m", "gt_points", "tp"}``, ``None`` for undefined values."""
+        return {'recall': _json_float(self.recall), 'mean_error_m': _json_float(self.mean_error_m),
+                'gt_points': self.gt_points, 'tp': self.tp}
+
+
 def _json_float(value: float) -> float | None:
     return None if value is None or not math.isfinite(value) else float(value)
 
@@ -152,10 +197,16 @@ class SequenceScorer:
     tp: int = 0
     n_gt: int = 0
     n_est: int = 0
+    #: kind -> [ground-truth points, TPs, sum of TP errors (m)] over the scored frames.
+    kinds: dict[str, list[float]] = field(default_factory=dict)
 
-    def add(self, estimated: npt.ArrayLike | None,
-            ground_truth: npt.ArrayLike | None) -> FrameScore | None:
-        """Score one frame; returns its :class:`FrameScore` (None when not annotated)."""
+    def add(self, estimated: npt.ArrayLike | None, ground_truth: npt.ArrayLike | None,
+            kinds: npt.ArrayLike | None = None) -> FrameScore | None:
+        """Score one frame; returns its :class:`FrameScore` (None when not annotated).
+
+        ``kinds``: optional (N,) kind name per ground-truth point (see :func:`kinds_of_ids`);
+        frames without it do not count in :meth:`kind_result`.
+        """
         self.frames += 1
         if ground_truth is None:
             return None
@@ -166,7 +217,30 @@ class SequenceScorer:
         self.tp += score.tp
         self.n_gt += score.n_gt
         self.n_est += score.n_est
+        if kinds is not None:
+            self._add_kinds(np.asarray(kinds).reshape(-1), score)
         return score
+
+    def _add_kinds(self, kinds: npt.NDArray[np.str_], score: FrameScore) -> None:
+        if len(kinds) != score.n_gt:
+            msg = f'{len(kinds)} kinds given for {score.n_gt} ground-truth points'
+            raise ValueError(msg)
+        matched = kinds[score.matches[:, 1]]
+        for kind in np.unique(kinds).tolist():
+            acc = self.kinds.setdefault(kind, [0, 0, 0.0])
+            hit = matched == kind
+            acc[0] += int(np.count_nonzero(kinds == kind))
+            acc[1] += int(np.count_nonzero(hit))
+            acc[2] += float(score.errors[hit].sum())
+
+    def kind_result(self) -> dict[str, KindScore]:
+        """Per kind (in :data:`KINDS` order): recall over its ground-truth points, mean error."""
+        out = {}
+        for kind in sorted(self.kinds, key=_kind_key):
+            n, tp, err = self.kinds[kind]
+            out[kind] = KindScore(tp / n if n else math.nan, err / tp if tp else math.nan,
+                                  int(n), int(tp))
+        return out
 
     @property
     def scored_frames(self) -> int:
@@ -189,6 +263,19 @@ def mean_over_sequences(scores: Sequence[MethodScore]) -> MethodScore:
     return MethodScore(_nanmean(s.recall for s in scores),
                        _nanmean(s.mean_error_m for s in scores),
                        _nanmean(s.fpr for s in scores))
+
+
+def mean_kinds_over_sequences(scores: Sequence[dict[str, KindScore]]) -> dict[str, KindScore]:
+    """Per kind, the mean over the sequences that have that kind (as the overall figures);
+    ``gt_points`` and ``tp`` are the sums."""
+    kinds = sorted({k for s in scores for k in s}, key=_kind_key)
+    out = {}
+    for kind in kinds:
+        have = [s[kind] for s in scores if kind in s]
+        out[kind] = KindScore(_nanmean(k.recall for k in have),
+                              _nanmean(k.mean_error_m for k in have),
+                              sum(k.gt_points for k in have), sum(k.tp for k in have))
+    return out
 
 
 def score_sequence(estimates: Iterable[npt.ArrayLike | None],

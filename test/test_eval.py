@@ -236,3 +236,75 @@ def test_predicted_false_positives_are_counted(tmp_path: Path) -> None:
     # Two strays in each of the 3 scored frames; one of each pair is a predicted track.
     assert counts['predicted_false_positives'] == 3
     assert report['sequences'][0]['temporal']['fpr'] == pytest.approx(2 / 5)  # per frame, Eq. 12
+
+
+def _set_custom_data(bag: Path, custom: dict[str, str]) -> None:
+    """Add rosbag2 ``custom_data`` to a bag's metadata.yaml, as a recorder would."""
+    import yaml
+
+    meta = yaml.safe_load((bag / 'metadata.yaml').read_text())
+    meta['rosbag2_bagfile_information']['custom_data'] = custom
+    (bag / 'metadata.yaml').write_text(yaml.safe_dump(meta))
+
+
+def _miss_second_blob(frame: Any, params: Any = None) -> Any:
+    """Single-frame fake that misses the blob second from the left (ground-truth id 1)."""
+    est = fake_estimate_frame(frame, params)
+
+    class _Est:
+        def positions(self) -> np.ndarray:
+            pos = est.positions()
+            return np.delete(pos, np.argsort(pos[:, 0])[1], axis=0)
+
+    return _Est()
+
+
+def test_attribute_groups_and_kinds(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    people = dict(width=160, n_blobs=5)  # ids 0-4: head, hands, feet; all blobs in view
+    write_bag(tmp_path / 'a', BagSpec(frames=4, **people))
+    write_bag(tmp_path / 'b', BagSpec(frames=4, storage='sqlite3', **people))
+    write_bag(tmp_path / 'c', BagSpec(frames=4, **people))
+    write_bag(tmp_path / 'd', BagSpec(frames=4, **people))
+    _set_custom_data(tmp_path / 'a', {'endeff.attributes': json.dumps(
+        {'view': 'side', 'camera_height_m': 0.8, 'distance_m': 3.0, 'split': 'dev',
+         'people': 1, 'truncated': False, 'markers': [1, 2]}), 'other.key': 'x'})
+    _set_custom_data(tmp_path / 'b', {'endeff.attributes': json.dumps(
+        {'view': 'front', 'camera_height_m': 1.6, 'split': 'test', 'people': 1})})
+    _set_custom_data(tmp_path / 'd', {'endeff.attributes': '{"view": '})
+    report, _ = evaluate_bags([tmp_path], estimate_fn=_miss_second_blob,
+                              tracker_factory=FakeTracker)
+    err = capsys.readouterr().err
+    seqs = {s['bag']: s for s in report['sequences']}
+    assert set(seqs) == {'a', 'b', 'c', 'd'} and report['failed'] == []
+    assert seqs['a']['attributes']['view'] == 'side' and seqs['c']['attributes'] == {}
+    # The malformed value is a warning naming the bag; the bag is still scored.
+    assert seqs['d']['attributes'] == {} and str(tmp_path / 'd') in seqs['d']['attribute_warning']
+    assert 'warning' in err and str(tmp_path / 'd') in err
+    groups = report['groups']
+    assert groups['view=side']['sequences'] == ['a']
+    assert groups['view=side']['attribute'] == 'view'
+    assert groups['split=test']['sequences'] == ['b']
+    assert list(k for k in groups if k.startswith('camera_height_m')) == [
+        'camera_height_m=<1', 'camera_height_m=1-1.6']
+    assert groups['distance_m=2-3.5']['sequences'] == ['a']
+    assert groups['truncated=false']['sequences'] == ['a']
+    assert not any(k.startswith('markers') for k in groups)  # a list is not groupable
+    # People bags: per-kind recall; the single-frame fake misses one of the two hands.
+    for name in ('a', 'b'):
+        kinds = seqs[name]['kinds']
+        assert {k: v['recall'] for k, v in kinds['temporal'].items()} == {
+            'head': 1.0, 'hand': 1.0, 'foot': 1.0}
+        assert {k: v['recall'] for k, v in kinds['single_frame'].items()} == {
+            'head': 1.0, 'hand': 0.5, 'foot': 1.0}
+        assert kinds['single_frame']['hand']['gt_points'] == 8
+    # Without the people attribute (and not a paper person sequence) the ids are 'other'.
+    assert list(seqs['c']['kinds']['temporal']) == ['other']
+    assert report['kinds']['single_frame']['hand']['recall'] == 0.5
+    assert report['kinds']['single_frame']['other']['recall'] == pytest.approx(0.8)
+    assert groups['view=front']['kinds']['single_frame']['hand']['recall'] == 0.5
+    json.dumps(report, allow_nan=False)
+    table = format_table(report)
+    assert '-- view ' in table and '-- camera_height_m ' in table
+    assert 'split' in table.splitlines()[1]
+    assert any(line.startswith('a ') and ' dev ' in line for line in table.splitlines())
+    assert 'per kind' in table and 'hand' in table

@@ -8,8 +8,11 @@ import numpy as np
 import pytest
 
 from endeff_ros.scoring import (
+    KindScore,
     MethodScore,
     SequenceScorer,
+    kinds_of_ids,
+    mean_kinds_over_sequences,
     mean_over_sequences,
     score_frame,
     score_sequence,
@@ -105,3 +108,50 @@ def test_score_sequence_and_overall() -> None:
     assert b.to_json() == {'recall': 1.0, 'mean_error_m': None, 'fpr': 0.0}
     with pytest.raises(ValueError):
         score_sequence([None], [None, None])
+
+
+def test_kinds_of_ids() -> None:
+    ids = np.array([0, 1, 2, 3, 4, 5, 7, 9], np.uint32)
+    assert kinds_of_ids(ids, person=True).tolist() == [
+        'head', 'hand', 'hand', 'foot', 'foot', 'head', 'hand', 'foot']
+    assert kinds_of_ids(ids, person=False).tolist() == ['other'] * 8
+    with pytest.raises(ValueError, match='non-negative integers'):
+        kinds_of_ids([-1, 0], person=True)
+
+
+def test_kind_recall_follows_the_frame_assignment() -> None:
+    gt = np.array([[0.0, 0.0, 2.0], [0.12, 0.0, 2.0], [0.0, 1.0, 2.0]])
+    kinds = np.array(['head', 'hand', 'foot'])
+    scorer = SequenceScorer()
+    # Frame 1: one estimate between head and hand, 0.06 m from each; the assignment gives it to
+    # one of them only; the foot is found 0.02 m off.
+    s1 = scorer.add([[0.06, 0.0, 2.0], [0.0, 1.02, 2.0]], gt, kinds)
+    assert s1.tp == 2
+    # Frame 2: only the hand, 0.04 m off, plus a false positive.
+    scorer.add([[0.12, 0.04, 2.0], [3.0, 3.0, 3.0]], gt, kinds)
+    # Frame 3: annotated without kinds: scored, left out of the kinds.
+    scorer.add(gt, gt)
+    got = scorer.kind_result()
+    assert list(got) == ['head', 'hand', 'foot']
+    head_hits = int(s1.matches[0, 1] == 0 or s1.matches[1, 1] == 0)
+    assert got['head'].gt_points == 2 and got['head'].tp == head_hits
+    assert got['hand'].tp == 2 - head_hits
+    assert got['head'].recall + got['hand'].recall == pytest.approx(0.5 + 0.5)
+    assert got['foot'].recall == pytest.approx(0.5)
+    assert got['foot'].mean_error_m == pytest.approx(0.02)
+    assert got['hand'].mean_error_m == pytest.approx(0.04 if head_hits else 0.05)
+    assert scorer.result().recall == pytest.approx((2 / 3 + 1 / 3 + 1) / 3)
+    with pytest.raises(ValueError, match='2 kinds given for 3'):
+        scorer.add(gt, gt, kinds[:2])
+
+
+def test_kind_means_over_sequences() -> None:
+    a = {'head': KindScore(1.0, 0.02, 4, 4), 'hand': KindScore(0.5, math.nan, 4, 0)}
+    b = {'hand': KindScore(0.0, math.nan, 2, 0), 'other': KindScore(1.0, 0.05, 3, 3)}
+    got = mean_kinds_over_sequences([a, b])
+    assert list(got) == ['head', 'hand', 'other']
+    assert got['hand'].recall == pytest.approx(0.25)  # mean over the two sequences with hands
+    assert math.isnan(got['hand'].mean_error_m)
+    assert (got['hand'].gt_points, got['hand'].tp) == (6, 0)
+    assert got['head'].recall == 1.0 and got['other'].mean_error_m == 0.05
+    assert got['hand'].to_json()['mean_error_m'] is None
