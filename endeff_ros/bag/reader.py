@@ -10,7 +10,10 @@ Topics default to the benchmark-bag contract (``/camera/color/image_raw``,
 ``/camera/depth/image_raw``, ``/camera/depth/camera_info``, ``/ground_truth/end_effectors``).
 When a bag lacks them, common driver layouts are recognised (RealSense ``realsense2_camera``
 aligned depth, Azure Kinect ``depth_to_rgb``) under any namespace, and the choice is stated in
-:attr:`TopicSelection.preset` / :meth:`TopicSelection.describe`.
+:attr:`TopicSelection.preset` / :meth:`TopicSelection.describe`. Recordings made through
+image_transport count too: where a raw image topic is absent, ``<topic>/compressed`` (colour)
+and ``<topic>/compressedDepth`` or ``<topic>/compressed`` (depth) of type
+``sensor_msgs/msg/CompressedImage`` stand for it, decoded by :mod:`endeff_ros.image_codecs`.
 
 Ground truth is matched to a frame by exact equality of its ``header.stamp`` with the depth
 image's (the contract). A depth image that finds no colour partner within the slop is still
@@ -41,6 +44,7 @@ if TYPE_CHECKING:
     from endeff_ros.core.types import RGBDFrame
 
 IMAGE = 'sensor_msgs/msg/Image'
+COMPRESSED = 'sensor_msgs/msg/CompressedImage'
 CAMERA_INFO = 'sensor_msgs/msg/CameraInfo'
 POINTCLOUD2 = 'sensor_msgs/msg/PointCloud2'
 
@@ -60,6 +64,10 @@ PRESETS: tuple[tuple[str, str, str, str], ...] = (
 )
 
 BAG_SUFFIXES = ('.mcap', '.db3')
+
+#: image_transport topics that stand for a raw image topic when it is absent, in this order.
+COLOR_VARIANTS = ('', '/compressed')
+DEPTH_VARIANTS = ('', '/compressedDepth', '/compressed')
 
 
 @dataclass(frozen=True)
@@ -205,12 +213,23 @@ def _typestore() -> Any:
     return get_typestore(Stores.ROS2_JAZZY)
 
 
+def _pick(topics: dict[str, str | None], base: str, variants: tuple[str, ...]) -> str | None:
+    """The first of ``base + variant`` in the bag (raw before compressed), or None."""
+    for v in variants:
+        if base + v in topics:
+            return base + v
+    return None
+
+
 def select_topics(topics: dict[str, str | None], options: ReaderOptions,
                   bag: object = '') -> TopicSelection:
     """Choose colour, depth, camera info and ground-truth topics from ``topic -> msgtype``.
 
     Explicit options win; otherwise the contract's names, else the first complete
-    :data:`PRESETS` layout under any namespace. Raises :class:`BagError` naming what is missing.
+    :data:`PRESETS` layout under any namespace. Where a raw image topic is absent, its
+    image_transport variants count as well (``.../compressed`` for colour,
+    ``.../compressedDepth`` then ``.../compressed`` for depth). Raises :class:`BagError`
+    naming what is missing.
     """
     explicit = (options.color_topic, options.depth_topic, options.info_topic)
     gt = options.gt_topic or DEFAULT_GT
@@ -218,15 +237,16 @@ def select_topics(topics: dict[str, str | None], options: ReaderOptions,
         gt_topic: str | None = None
     else:
         gt_topic = gt
+    color = _pick(topics, DEFAULT_COLOR, COLOR_VARIANTS)
+    depth = _pick(topics, DEFAULT_DEPTH, DEPTH_VARIANTS)
     if all(explicit):
         sel = TopicSelection(*explicit, gt_topic, 'given topics')  # type: ignore[arg-type]
     elif any(explicit):
-        want = (options.color_topic or DEFAULT_COLOR, options.depth_topic or DEFAULT_DEPTH,
-                options.info_topic or DEFAULT_INFO)
+        want = (options.color_topic or color or DEFAULT_COLOR,
+                options.depth_topic or depth or DEFAULT_DEPTH, options.info_topic or DEFAULT_INFO)
         sel = TopicSelection(*want, gt_topic, 'given topics (others: benchmark contract)')
-    elif all(t in topics for t in (DEFAULT_COLOR, DEFAULT_DEPTH, DEFAULT_INFO)):
-        sel = TopicSelection(DEFAULT_COLOR, DEFAULT_DEPTH, DEFAULT_INFO, gt_topic,
-                             'benchmark contract')
+    elif color and depth and DEFAULT_INFO in topics:
+        sel = TopicSelection(color, depth, DEFAULT_INFO, gt_topic, 'benchmark contract')
     else:
         sel = _detect(topics, gt_topic, bag)
     _check_types(topics, sel, bag)
@@ -235,33 +255,40 @@ def select_topics(topics: dict[str, str | None], options: ReaderOptions,
 
 def _detect(topics: dict[str, str | None], gt_topic: str | None, bag: object) -> TopicSelection:
     for name, c_sfx, d_sfx, i_sfx in PRESETS:
-        prefixes = sorted(t[:-len(d_sfx)] for t in topics if t.endswith(d_sfx))
-        for prefix in prefixes:
-            color, depth, info = prefix + c_sfx, prefix + d_sfx, prefix + i_sfx
-            if color in topics and info in topics:
-                return TopicSelection(color, depth, info, gt_topic, f'detected {name} layout')
-    images = sorted(t for t, typ in topics.items() if typ in (IMAGE, CAMERA_INFO))
+        for variant in DEPTH_VARIANTS:
+            ending = d_sfx + variant
+            prefixes = sorted(t[:-len(ending)] for t in topics if t.endswith(ending))
+            for prefix in prefixes:
+                color = _pick(topics, prefix + c_sfx, COLOR_VARIANTS)
+                info = prefix + i_sfx
+                if color and info in topics:
+                    return TopicSelection(color, prefix + ending, info, gt_topic,
+                                          f'detected {name} layout')
+    images = sorted(t for t, typ in topics.items() if typ in (IMAGE, COMPRESSED, CAMERA_INFO))
     wanted = ', '.join(t for t in (DEFAULT_COLOR, DEFAULT_DEPTH, DEFAULT_INFO)
                        if t not in topics)
-    problem = (f'missing topic(s) {wanted} and no RealSense or Azure Kinect layout found; '
-               f'image/camera-info topics in the bag: {", ".join(images) or "none"} '
-               f'(choose with --color-topic/--depth-topic/--info-topic)')
+    problem = (f'missing topic(s) {wanted} (raw or compressed) and no RealSense or Azure '
+               f'Kinect layout found; image/camera-info topics in the bag: '
+               f'{", ".join(images) or "none"} (choose with --color-topic/--depth-topic/'
+               f'--info-topic)')
     raise BagError(bag, problem)
 
 
 def _check_types(topics: dict[str, str | None], sel: TopicSelection, bag: object) -> None:
-    wants = [('colour', sel.color, IMAGE), ('depth', sel.depth, IMAGE),
-             ('camera info', sel.info, CAMERA_INFO)]
+    wants = [('colour', sel.color, (IMAGE, COMPRESSED)), ('depth', sel.depth, (IMAGE, COMPRESSED)),
+             ('camera info', sel.info, (CAMERA_INFO,))]
     if sel.gt is not None:
-        wants.append(('ground truth', sel.gt, POINTCLOUD2))
-    for role, topic, typ in wants:
+        wants.append(('ground truth', sel.gt, (POINTCLOUD2,)))
+    for role, topic, types in wants:
         if topic not in topics:
-            raise BagError(bag, f'missing {role} topic {topic} ({sel.preset})')
+            variants = COLOR_VARIANTS if role == 'colour' else DEPTH_VARIANTS
+            near = [topic + v for v in variants[1:] if topic + v in topics]
+            hint = f'; the bag has {", ".join(near)}' if near else ''
+            raise BagError(bag, f'missing {role} topic {topic} ({sel.preset}){hint}')
         have = topics[topic]
-        if have != typ:
-            hint = ' (compressed images are not supported)' if have and 'Compressed' in have \
-                else ''
-            raise BagError(bag, f'{role} topic {topic} has type {have}, expected {typ}{hint}')
+        if have not in types:
+            raise BagError(bag, f'{role} topic {topic} has type {have}, expected '
+                                f'{" or ".join(types)}')
 
 
 class BagReader:

@@ -8,6 +8,9 @@ builders import the message classes when they are called, so that the node and t
 
 Depth follows ``depth_image_proc``: ``16UC1`` is millimetres, ``32FC1`` is metres, 0 (and NaN)
 means no reading; anything else is an :class:`~endeff_ros.core.errors.InputError`.
+``sensor_msgs/CompressedImage`` (image_transport's ``compressed`` and ``compressedDepth``) is
+decoded by :mod:`endeff_ros.image_codecs`; :func:`frame_from_messages` takes raw and compressed
+messages alike.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from endeff_ros import image_codecs
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.types import Intrinsics, RGBDFrame
 
@@ -117,17 +121,8 @@ def depth_image_to_array(msg: Any) -> npt.NDArray[np.float32]:
         msg_ = (f'unsupported depth encoding {encoding!r} (expected 16UC1 in millimetres or '
                 f'32FC1 in metres)')
         raise InputError(msg_)
-    base, scale = _DEPTH_ENCODINGS[encoding]
-    pixels = _image_pixels(msg, base, 1)[:, :, 0]
-    depth = pixels.astype(np.float32)
-    if scale != 1.0:
-        depth *= np.float32(scale)
-    if np.issubdtype(pixels.dtype, np.integer):
-        depth[pixels == 0] = np.nan  # integer millimetres: 0 is the only non-reading
-    else:
-        with np.errstate(invalid='ignore'):
-            depth[~(depth > 0) | ~np.isfinite(depth)] = np.nan
-    return depth
+    base, _ = _DEPTH_ENCODINGS[encoding]
+    return image_codecs.depth_to_metres(_image_pixels(msg, base, 1)[:, :, 0], encoding)
 
 
 def color_image_to_array(msg: Any) -> npt.NDArray[np.uint8]:
@@ -147,6 +142,37 @@ def color_image_to_array(msg: Any) -> npt.NDArray[np.uint8]:
     return out
 
 
+def is_compressed(msg: Any) -> bool:
+    """True for a ``sensor_msgs/CompressedImage`` (``format``, no ``encoding``)."""
+    return hasattr(msg, 'format') and not hasattr(msg, 'encoding')
+
+
+def compressed_color_to_array(msg: Any) -> npt.NDArray[np.uint8]:
+    """``sensor_msgs/CompressedImage`` colour (image_transport ``compressed``: JPEG or PNG,
+    rgb8/bgr8/rgba8/bgra8/mono8) -> (H, W, 3) uint8 RGB."""
+    return image_codecs.decode_color(str(msg.format), msg.data)
+
+
+def compressed_depth_to_array(msg: Any) -> npt.NDArray[np.float32]:
+    """``sensor_msgs/CompressedImage`` depth (``compressedDepth`` PNG of 16UC1 or 32FC1, or a
+    ``compressed`` 16UC1 PNG) -> (H, W) float32 metres, NaN where there is no reading."""
+    return image_codecs.decode_depth(str(msg.format), msg.data)
+
+
+def any_color_to_array(msg: Any) -> npt.NDArray[np.uint8]:
+    """Raw or compressed colour image -> (H, W, 3) uint8 RGB."""
+    if is_compressed(msg):
+        return compressed_color_to_array(msg)
+    return color_image_to_array(msg)
+
+
+def any_depth_to_array(msg: Any) -> npt.NDArray[np.float32]:
+    """Raw or compressed depth image -> (H, W) float32 metres, NaN where there is no reading."""
+    if is_compressed(msg):
+        return compressed_depth_to_array(msg)
+    return depth_image_to_array(msg)
+
+
 def camera_info_to_intrinsics(msg: Any) -> Intrinsics:
     """``sensor_msgs/CameraInfo`` -> :class:`Intrinsics` (InputError for zero/invalid K)."""
     k = getattr(msg, 'k', None)
@@ -158,14 +184,15 @@ def camera_info_to_intrinsics(msg: Any) -> Intrinsics:
 def frame_from_messages(color_msg: Any | None, depth_msg: Any, info_msg: Any) -> RGBDFrame:
     """One synchronised set -> :class:`RGBDFrame` stamped and framed by the depth header.
 
+    Colour and depth may each be ``sensor_msgs/Image`` or ``sensor_msgs/CompressedImage``.
     Raises :class:`InputError` for unknown encodings, unusable intrinsics or size mismatches.
     """
     if info_msg is None:
         msg_ = 'no camera info received yet for the depth image'
         raise InputError(msg_)
-    depth = depth_image_to_array(depth_msg)
+    depth = any_depth_to_array(depth_msg)
     intrinsics = camera_info_to_intrinsics(info_msg)
-    color = color_image_to_array(color_msg) if color_msg is not None else None
+    color = any_color_to_array(color_msg) if color_msg is not None else None
     return RGBDFrame(stamp_ns=stamp_to_ns(depth_msg.header.stamp),
                      frame_id=str(depth_msg.header.frame_id), depth=depth,
                      intrinsics=intrinsics, color=color)
