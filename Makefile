@@ -28,16 +28,16 @@ $(DATA)/.done: $(STAMP)
 data: $(DATA)/.done
 
 run: $(DATA)/.done
-	$(BIN)/python -m endeff_ros.demo --data $(DATA)
+	$(BIN)/python -m tools.demo --data $(DATA)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -p no:cacheprovider $(PYTEST_ARGS)
 
 bench: $(STAMP)
-	$(BIN)/endeff bench --json bench.json
+	$(BIN)/python -m tools.bench --json bench.json
 
 lint: $(STAMP)
-	$(BIN)/ruff check endeff_ros test
+	$(BIN)/ruff check endeff_ros test tools
 
 clean:
 	rm -rf build install log $(VENV) data

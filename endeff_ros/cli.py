@@ -15,7 +15,6 @@ import sys
 from typing import Any
 
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
-    'bench': ('endeff_ros.bench', 'Time the single-frame estimator and the full pipeline.'),
     'synth': ('endeff_ros.synth.cli', 'Generate synthetic RGB-D benchmark bags.'),
     'sheet': ('endeff_ros.synth.sheet', 'Draw a contact sheet (PNG) of benchmark bags.'),
     'eval': ('endeff_ros.evaluate', 'Score single-frame and temporal estimators on bags.'),

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from bag_helpers import real_core  # noqa: F401 - fixture
 
-from endeff_ros.bag.bench_process import bench_process
+from tools.bench_process import bench_process
 
 pytest.importorskip('rclpy')
 

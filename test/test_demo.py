@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from endeff_ros import demo
+from tools import demo
 
 
 def _record(stamps, clouds):

@@ -8,8 +8,8 @@ import pytest
 
 from endeff_ros.core.errors import InputError, ParameterError
 from endeff_ros.core.flow import METHODS, FlowEstimator, propagate_points
-from endeff_ros.core.flow_eval import flow_benchmark, make_pair, texture
 from endeff_ros.core.types import Intrinsics
+from tools.flow_eval import flow_benchmark, make_pair, texture
 
 W, H = 640, 480
 K = Intrinsics(fx=525.0, fy=525.0, cx=319.5, cy=239.5, width=W, height=H)

@@ -2,7 +2,7 @@
 
 The node runs as a subprocess with the Fast DDS SHM profile; a driver process replays the bag
 (original stamps, jittered colour/depth send times, lock-step) and a subscriber node in it
-collects the outputs (:func:`endeff_ros.ros.session.run_session`). Checked: one cloud per depth
+collects the outputs (:func:`tools.session.run_session`). Checked: one cloud per depth
 image with its stamp and frame_id, markers equal to the cloud, and recall equal (within 0.02) to
 the offline evaluation of the same bag.
 """
@@ -34,13 +34,13 @@ def bag(tmp_path_factory):
 
 @pytest.fixture(scope='module')
 def record(bag):
-    from endeff_ros.ros.session import run_session
+    from tools.session import run_session
 
     return run_session(bag, timeout_s=240.0, frame_timeout_s=20.0)
 
 
 def _depth_frame_id(bag) -> str:
-    from endeff_ros.ros.replay import BagSource
+    from tools.replay import BagSource
 
     with BagSource(bag) as source:
         conns = [c for c in source.bag.reader.connections if c.topic == source.topics['depth']]
@@ -49,7 +49,7 @@ def _depth_frame_id(bag) -> str:
 
 
 def test_one_cloud_per_depth_frame_with_its_stamp_and_frame(bag, record):
-    from endeff_ros.ros.replay import BagSource
+    from tools.replay import BagSource
 
     with BagSource(bag) as source:
         stamps = source.depth_stamps()
@@ -76,9 +76,9 @@ def test_markers_match_cloud(record):
 
 
 def test_recall_equals_offline_evaluation(bag, record):
-    from endeff_ros.demo import score_record
     from endeff_ros.evaluate import evaluate_bag
-    from endeff_ros.ros.replay import BagSource
+    from tools.demo import score_record
+    from tools.replay import BagSource
 
     with BagSource(bag) as source:
         gt = source.ground_truth()
@@ -121,8 +121,8 @@ def test_latency_bench_accounts_for_every_frame(bag):
     """The latency benchmark (node and relay over DDS, open loop): every depth image sent
     has an output, or is counted as dropped by the node, or as an unpaired input (the bag
     drops a colour image on purpose); latencies are positive; markers unsubscribed."""
-    from endeff_ros.ros.latency_bench import ros_latency_bench
-    from endeff_ros.ros.replay import BagSource, cdr_stamp, unpaired_depth
+    from tools.latency_bench import ros_latency_bench
+    from tools.replay import BagSource, cdr_stamp, unpaired_depth
 
     result = ros_latency_bench(bag, rate_hz=15.0, loops=1)
     node, relay = result['node'], result['relay']

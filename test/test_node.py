@@ -267,7 +267,7 @@ def test_runtime_parameters(harness):
         assert not result.successful and reason in result.reason, (name, result.reason)
     assert h.node.params.band_delta == 0.12 and h.node.params.box_min_z == 0.4
     assert h.node.set_parameters([Parameter('sync_slop', value=0.03)])[0].successful
-    assert h.node._sync.slop_ns == 30_000_000
+    assert h.node.scheduler.slop_ns == 30_000_000
     h.send(8_100_000_000, info=False)  # the new synchroniser kept the latched camera info
     assert h.wait_clouds(2)
     bad = h.node.set_parameters([Parameter('input_reliability', value='reliable')])[0]

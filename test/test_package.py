@@ -103,6 +103,10 @@ def test_colcon_install_layout_matches_ros2_run(install: Path,
     site = _site_packages(prefix)
     assert (site / PACKAGE / 'core' / 'flow.py').is_file()
     assert not (site / 'test').exists(), 'the test directory must not be installed'
+    assert not (site / 'tools').exists(), 'development tools must not be installed'
+    tool_modules = {p.stem for p in (REPO / 'tools').glob('*.py')} - {'__init__'}
+    installed = {p.stem for p in site.rglob('*.py')}
+    assert not tool_modules & installed, f'tools installed: {sorted(tool_modules & installed)}'
 
 
 @pytest.mark.slow
@@ -263,7 +267,7 @@ def _module_names() -> list[str]:
         names.append(f'{PACKAGE}.synth' if path.stem == '__init__' else
                      f'{PACKAGE}.synth.{path.stem}')
     names += [f'{PACKAGE}.{m}' for m in ('synth', 'scoring', 'evaluate', 'bag.reader', 'sync',
-                                         'cli')]
+                                         'cli', 'ros.scheduler', 'ros.processing')]
     return list(dict.fromkeys(names))
 
 
@@ -316,10 +320,10 @@ def test_ruff_passes() -> None:
     else:
         pytest.skip('ruff is not installed')
     proc = subprocess.run([*cmd, 'check', '--no-cache', '--output-format', 'concise',
-                           'endeff_ros', 'test'], cwd=REPO, capture_output=True, text=True,
-                          timeout=120, check=False)
+                           'endeff_ros', 'test', 'tools'], cwd=REPO, capture_output=True,
+                          text=True, timeout=120, check=False)
     files = sorted({line.split(':', 1)[0] for line in proc.stdout.splitlines()
-                    if line.startswith(('endeff_ros', 'test')) and ':' in line})
+                    if line.startswith(('endeff_ros', 'test', 'tools')) and ':' in line})
     assert proc.returncode == 0, (f'ruff fails in {len(files)} file(s): {", ".join(files)}\n'
                                   f'{proc.stdout}{proc.stderr}')
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from endeff_ros.ros import convert
-from endeff_ros.ros.procs import profile_path, ros_env
-from endeff_ros.ros.replay import (
+from tools.procs import profile_path, ros_env
+from tools.replay import (
     Output,
     RawMessage,
     cdr_stamp,

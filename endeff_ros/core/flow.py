@@ -9,7 +9,7 @@ turns the flow into the predicted 3D positions E_{t+1}^{pr}.
 
 Choice of the default (measured)
 --------------------------------
-Synthetic 640x480 pairs with exact flow (:mod:`endeff_ros.core.flow_eval`): a textured blob
+Synthetic 640x480 pairs with exact flow (:mod:`tools.flow_eval`): a textured blob
 (160x100 px, a forearm and hand at ~2 m) moving by 2-25 px with up to 4 deg rotation and 4 %
 scale over a textured static background (a torso: motion discontinuity, occlusions not scored),
 plus a whole-image pan; 3 textures per case, sensor noise sigma 2. EPE = endpoint error in px
@@ -17,7 +17,7 @@ plus a whole-image pan; 3 textures per case, sensor noise sigma 2. EPE = endpoin
 :meth:`FlowEstimator.flow` (``cv2.setNumThreads(1)``, grayscale conversion and resizing
 included). Produced by::
 
-    .venv/bin/python -m endeff_ros.core.flow_eval --repeats 15
+    .venv/bin/python -m tools.flow_eval --repeats 15
 
 =============  =====  ========  ========  =========  =======  ===============================
 method         scale  EPE mean  EPE obj   obj worst  ms 1 th  obj EPE by case 2/5/10/15/25 px
@@ -170,12 +170,6 @@ class FlowEstimator:
             return small
         return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
 
-
-def flow_benchmark(**kwargs: Any) -> dict[str, Any]:
-    """Accuracy / speed table of the flow methods (see :func:`.flow_eval.flow_benchmark`)."""
-    from .flow_eval import flow_benchmark as run
-
-    return run(**kwargs)
 
 
 # --- 3D scene flow: propagate points (Section 5.1, E_{t+1}^{pr} = Dnc(E_t, θ_t)) -------------

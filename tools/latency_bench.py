@@ -1,7 +1,7 @@
 """End-to-end latency of endeff_node over DDS, against a trivial relay in the same run.
 
 A synthetic (or any benchmark) bag is replayed at a fixed rate (30 Hz by default, open loop, as
-a live camera would send it) to ``endeff_node`` and to :mod:`endeff_ros.ros.relay`, each in its
+a live camera would send it) to ``endeff_node`` and to :mod:`tools.relay`, each in its
 own process with the Fast DDS SHM profile. Latency is measured from the publication of each
 depth image to the receipt of the output stamped with it (same clock, the driver process).
 A frame without an output is ``dropped`` (the node skips frames it is too slow for), unless
@@ -10,9 +10,9 @@ its depth image had no colour image within the node's ``sync_slop`` in the bag: 
 approximate-time synchroniser cannot complete such a set, and the node only processes a depth
 image alone once colour has been missing for ``color_timeout``).
 
-    python -m endeff_ros.ros.latency_bench [--bag BAG] [--rate 30] [--loops 3] [--no-profile]
+    python -m tools.latency_bench [--bag BAG] [--rate 30] [--loops 3] [--no-profile]
 
-``benchmark()`` (what ``endeff bench --ros`` calls) and ``ros_latency_bench()`` return the
+``benchmark()`` (what ``python -m tools.bench --ros`` calls) and ``ros_latency_bench()`` return the
 JSON-ready dict.
 """
 
@@ -32,7 +32,7 @@ DEFAULT_SEQUENCE = 'jumping_jacks'
 
 def _default_bag(tmp: Path) -> Path:
     """``data/synth/mcap/<sequence>`` if generated, else a full-length synthetic bag in ``tmp``."""
-    here = Path(__file__).resolve().parents[2] / 'data' / 'synth' / 'mcap' / DEFAULT_SEQUENCE
+    here = Path(__file__).resolve().parents[1] / 'data' / 'synth' / 'mcap' / DEFAULT_SEQUENCE
     if (here / 'metadata.yaml').is_file():
         return here
     from endeff_ros.synth.cli import generate_one
@@ -53,7 +53,7 @@ def ros_latency_bench(bag: str | Path | None = None, *, rate_hz: float = 30.0,
     ``dropped_frames`` and ``latency_ms_p50/p95/p99/max``. ``markers``: also subscribe to
     ``end_effectors/markers`` (as RViz would), which makes the node build them.
     """
-    from endeff_ros.ros.session import run_session
+    from tools.session import run_session
 
     with tempfile.TemporaryDirectory(prefix='endeff_bench_') as tmp:
         path = Path(bag) if bag is not None else _default_bag(Path(tmp))
@@ -72,9 +72,9 @@ def ros_latency_bench(bag: str | Path | None = None, *, rate_hz: float = 30.0,
 
 
 def benchmark(**kwargs: Any) -> dict[str, Any]:
-    """``endeff bench --ros``: :func:`ros_latency_bench` with every CPU available.
+    """``python -m tools.bench --ros``: :func:`ros_latency_bench` with every CPU available.
 
-    ``endeff bench`` pins itself to one core for the single-frame timings; the node, the relay
+    ``tools.bench`` pins itself to one core for the single-frame timings; the node, the relay
     and the driver are child processes and would inherit that, so the pinning is lifted for
     the duration of the run.
     """

@@ -1,4 +1,4 @@
-"""``endeff bench``: timing benchmarks, printed and written as JSON.
+"""``python -m tools.bench``: timing benchmarks, printed and written as JSON.
 
 - ``single_frame_ms``: Sections 3-4 (:func:`estimate_frame`) on one synthetic 640x480 frame of a
   standing person (~25 k foreground pixels at ~2.8 m), with per-stage medians in
@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from .cli import load_params_option, print_json
+from endeff_ros.cli import load_params_option, print_json
 
 
 def _pin_one_core() -> int | None:
@@ -63,10 +63,10 @@ def _stats(samples: list[float]) -> dict[str, float]:
 def bench_single_frame(repeats: int = 200, warmup: int = 10,
                        params: Any = None) -> dict[str, Any]:
     """Time :func:`estimate_frame` on one standing-person frame."""
-    from .core.params import EndeffParams
-    from .core.single_frame import estimate_frame
-    from .core.types import RGBDFrame
-    from .synth import render_person_frame
+    from endeff_ros.core.params import EndeffParams
+    from endeff_ros.core.single_frame import estimate_frame
+    from endeff_ros.core.types import RGBDFrame
+    from endeff_ros.synth import render_person_frame
 
     f = render_person_frame()
     frame = RGBDFrame(f.stamp_ns, f.frame_id, f.depth, f.intrinsics, f.color)
@@ -93,7 +93,7 @@ def bench_single_frame(repeats: int = 200, warmup: int = 10,
 
 def _foreground_pixels(frame: Any, params: Any) -> int:
     """Pixels left after the box and the floor removal at full resolution (Section 3)."""
-    from .core.cloud import foreground_cloud
+    from endeff_ros.core.cloud import foreground_cloud
 
     full = params.replace(pixel_stride=1, voxel_size=0.0)
     return len(foreground_cloud(frame.depth, frame.intrinsics, full)[0])
@@ -102,10 +102,10 @@ def _foreground_pixels(frame: Any, params: Any) -> int:
 def bench_full_pipeline(sequence: str = 'waving_two_hands', repeats: int = 2,
                         params: Any = None) -> dict[str, Any]:
     """Time :meth:`Tracker.update` per frame over a synthetic sequence, flow included."""
-    from .core.params import EndeffParams
-    from .core.tracker import Tracker
-    from .core.types import RGBDFrame
-    from .synth import render_sequence
+    from endeff_ros.core.params import EndeffParams
+    from endeff_ros.core.tracker import Tracker
+    from endeff_ros.core.types import RGBDFrame
+    from endeff_ros.synth import render_sequence
 
     frames = [RGBDFrame(f.stamp_ns, f.frame_id, f.depth, f.intrinsics, f.color)
               for f in render_sequence(sequence) if f.depth is not None]
@@ -141,22 +141,22 @@ def run(args: argparse.Namespace) -> int:
     cpu = None if args.no_pin else _pin_one_core()
     out: dict[str, Any] = {'machine': {'python': platform.python_version(),
                                        'cpu_count': os.cpu_count(), 'pinned_cpu': cpu}}
-    params = load_params_option(args.params, 'endeff bench')
+    params = load_params_option(args.params, 'python -m tools.bench')
     if params is not None:
         out['params'] = args.params
     out.update(bench_single_frame(repeats=args.repeats, params=params))
     out.update(bench_full_pipeline(params=params))
     if args.flow:
-        from .core.flow import flow_benchmark
+        from tools.flow_eval import flow_benchmark
 
         out['flow'] = flow_benchmark()
     if args.process:
-        from .bag.bench_process import bench_process
+        from tools.bench_process import bench_process
 
         with _all_cores():  # N bags on N processes: the one-core pin must not be inherited
             out['process'] = bench_process()
     if args.ros:
-        from .ros.latency_bench import benchmark as ros_benchmark
+        from tools.latency_bench import benchmark as ros_benchmark
 
         out['ros'] = ros_benchmark(node_params=params.to_dict() if params else None)
     print_json(out, args.json)
@@ -164,6 +164,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 if __name__ == '__main__':
-    parser = argparse.ArgumentParser(prog='endeff bench')
+    parser = argparse.ArgumentParser(prog='python -m tools.bench')
     add_arguments(parser)
     sys.exit(run(parser.parse_args()))

@@ -5,7 +5,7 @@ depth image, an empty ``relay/end_effectors`` cloud stamped with the depth heade
 same :func:`endeff_ros.ros.convert.tracks_to_cloud`). The difference between its latency and the
 node's is what synchronisation, conversion and the tracker cost.
 
-    python -m endeff_ros.ros.relay --ros-args -r __ns:=/camera
+    python -m tools.relay --ros-args -r __ns:=/camera
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image, PointCloud2
 
 from endeff_ros.ros import convert
-from endeff_ros.ros.procs import spin
+from endeff_ros.ros.executable import spin
 from endeff_ros.ros.ros_params import qos
 
 

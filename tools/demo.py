@@ -1,6 +1,6 @@
 """The main demonstration: every benchmark bag through ``endeff_node`` over DDS, scored.
 
-    python -m endeff_ros.demo --data DIR [--only a,b] [--no-offline] [--json report.json]
+    python -m tools.demo --data DIR [--only a,b] [--no-offline] [--json report.json]
 
 For each bag in ``DIR/mcap`` (else ``DIR/sqlite3``, else the bags under ``DIR``) a fresh
 ``endeff_node`` process is started with the Fast DDS SHM profile, the bag is replayed to it over
@@ -55,8 +55,8 @@ def score_record(record: dict[str, Any], gt: dict[int, np.ndarray]) -> SequenceS
 
 def run_bag(bag: Path, *, offline: bool) -> dict[str, Any]:
     """Node over DDS (and optionally offline) on one bag -> one report row."""
-    from endeff_ros.ros.replay import BagSource
-    from endeff_ros.ros.session import run_session
+    from tools.replay import BagSource
+    from tools.session import run_session
 
     with BagSource(bag) as source:
         gt = source.ground_truth()
@@ -123,7 +123,7 @@ def format_table(report: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog='python -m endeff_ros.demo',
+    parser = argparse.ArgumentParser(prog='python -m tools.demo',
                                      description=__doc__.splitlines()[0])
     parser.add_argument('--data', required=True, type=Path,
                         help='directory holding mcap/<sequence> bags (endeff synth --out)')

@@ -14,13 +14,14 @@ import sys
 from pathlib import Path
 from typing import Any
 
+_CHECKOUT = Path(__file__).resolve().parents[1]
 PROFILE_NAME = 'fastdds_shm.xml'
 _PROFILE_VARS = ('FASTDDS_DEFAULT_PROFILES_FILE', 'FASTRTPS_DEFAULT_PROFILES_FILE')
 
 
 def profile_path() -> Path:
     """``config/fastdds_shm.xml`` of the source tree, else of the installed package share."""
-    here = Path(__file__).resolve().parents[2] / 'config' / PROFILE_NAME
+    here = _CHECKOUT / 'config' / PROFILE_NAME
     if here.is_file():
         return here
     try:
@@ -39,6 +40,8 @@ def ros_env(*, profile: bool = True, domain_id: int | None = None,
     env = dict(os.environ if base is None else base)
     env.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
     env['PYTHONUNBUFFERED'] = '1'
+    # Children run ``python -m tools.NAME`` from any working directory: the checkout first.
+    env['PYTHONPATH'] = os.pathsep.join(p for p in (str(_CHECKOUT), env.get('PYTHONPATH')) if p)
     for var in _PROFILE_VARS:
         env.pop(var, None)
         if profile:
@@ -65,20 +68,3 @@ def stop(proc: subprocess.Popen, timeout: float = 10.0) -> int | None:
             continue
     return proc.poll()
 
-
-def spin(node_factory: Any, args: list[str] | None = None) -> None:
-    """``main`` of a node executable: init, spin until Ctrl-C or shutdown, clean up."""
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = node_factory()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()

@@ -11,7 +11,7 @@ sequence when :mod:`endeff_ros.synth` is available, else a plain moving-boxes sc
 Times include reading, synchronising, tracking, building and writing the output messages (the
 whole command), but not interpreter start-up. Prints/returns JSON; nothing is asserted.
 
-``python -m endeff_ros.bag.bench_process [--frames 30] [--bags 2] [--json FILE]``
+``python -m tools.bench_process [--frames 30] [--bags 2] [--json FILE]``
 """
 
 from __future__ import annotations
@@ -158,7 +158,7 @@ def _run_child(inputs: list[Path], output: Path, jobs: int, cpus: list[int]) -> 
     env = dict(os.environ)
     env.update({k: '1' for k in THREAD_VARS})
     code = ('import json, sys\n'
-            'from endeff_ros.bag.bench_process import measure\n'
+            'from tools.bench_process import measure\n'
             'a = json.loads(sys.argv[1])\n'
             'print(json.dumps(measure(a["inputs"], a["output"], a["jobs"], a["cpus"])))\n')
     arg = json.dumps({'inputs': [str(p) for p in inputs], 'output': str(output), 'jobs': jobs,
@@ -211,7 +211,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m endeff_ros.bag.bench_process``."""
+    """``python -m tools.bench_process``."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_arguments(parser)
     return run(parser.parse_args(argv))

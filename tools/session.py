@@ -1,7 +1,7 @@
 """One replay session over DDS, every participant in its own process.
 
 ``run_session(bag)`` starts ``endeff_node`` (and optionally the relay) and a driver process that
-replays the bag (:mod:`endeff_ros.ros.replay`) and collects the outputs, all with the same
+replays the bag (:mod:`tools.replay`) and collects the outputs, all with the same
 environment (Fast DDS, the SHM profile unless ``profile=False``, a private ROS domain). The
 driver writes a JSON record; ``run_session`` returns it as a dict::
 
@@ -11,7 +11,7 @@ driver writes a JSON record; ``run_session`` returns it as a dict::
      'duplicates': {'node': 0, ...}, 'markers': {stamp: [[id, x, y, z], ...]},
      'latency': {'node': {...}, 'relay': {...}}, 'diagnostics': {key: value}}
 
-Stamps are integers (nanoseconds). The driver is ``python -m endeff_ros.ros.session``.
+Stamps are integers (nanoseconds). The driver is ``python -m tools.session``.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from endeff_ros.ros.processing import NODE_PARAMS
-from endeff_ros.ros.procs import ros_env, start, stop
+from tools.procs import ros_env, start, stop
 
 
 def _node_args(namespace: str, params: dict[str, Any]) -> list[str]:
@@ -68,10 +68,10 @@ def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = 
                                 *_node_args(namespace, node_params or {})], env,
                                stdout=logs['node'], stderr=subprocess.STDOUT))
             if relay:
-                procs.append(start(['-m', 'endeff_ros.ros.relay',
+                procs.append(start(['-m', 'tools.relay',
                                     *_node_args(namespace, {})], env,
                                    stdout=logs['relay'], stderr=subprocess.STDOUT))
-            driver = ['-m', 'endeff_ros.ros.session', '--bag', str(bag), '--out', str(out),
+            driver = ['-m', 'tools.session', '--bag', str(bag), '--out', str(out),
                       '--namespace', namespace, '--jitter', str(jitter_s),
                       '--frame-timeout', str(frame_timeout_s),
                       '--sync-slop', str((node_params or {}).get('sync_slop', _DEFAULT_SLOP_S))]
@@ -124,7 +124,7 @@ def _driver(args: argparse.Namespace) -> int:
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
 
-    from endeff_ros.ros.replay import (
+    from tools.replay import (
         BagSource,
         Collector,
         Replayer,

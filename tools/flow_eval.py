@@ -9,7 +9,7 @@ pixels) and the single-thread time of each method, so the default is chosen from
   (a torso) by 2-25 px with up to 4 deg rotation and 4 % scale: a motion discontinuity. The
   background pixels the blob covers in the second frame are occluded and not scored.
 
-Run ``python -m endeff_ros.core.flow_eval`` (add ``--json`` for the raw table). ``endeff bench``
+Run ``python -m tools.flow_eval`` (add ``--json`` for the raw table). ``python -m tools.bench``
 includes :func:`flow_benchmark`.
 """
 
@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import numpy as np
 
-from .flow import FlowEstimator
+from endeff_ros.core.flow import FlowEstimator
 
 if TYPE_CHECKING:
     import numpy.typing as npt

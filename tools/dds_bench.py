@@ -5,7 +5,7 @@ another subscribes and records the wall time at receipt. For each combination of
 (on/off) and reliability (best effort/reliable) it reports the delivered fraction and the latency
 percentiles as JSON::
 
-    python -m endeff_ros.ros.dds_bench [--seconds 5] [--rate 30] [--json out.json]
+    python -m tools.dds_bench [--seconds 5] [--rate 30] [--json out.json]
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from endeff_ros.cli import print_json
-from endeff_ros.ros.procs import ros_env, start, stop
+from tools.procs import ros_env, start, stop
 
 TOPIC = '/endeff_dds_bench/image'
 
@@ -118,7 +118,7 @@ def run_one(*, profile: bool, reliability: str, seconds: float, rate: float,
     if domain_id is None:
         domain_id = 100 + os.getpid() % 100
     env = ros_env(profile=profile, domain_id=domain_id)
-    mod = ['-m', 'endeff_ros.ros.dds_bench']
+    mod = ['-m', 'tools.dds_bench']
     sub = start([*mod, 'sub', '--reliability', reliability, '--frames', str(frames)], env,
                 stdout=subprocess.PIPE, text=True)
     pub = start([*mod, 'pub', '--reliability', reliability, '--frames', str(frames),

@@ -1,0 +1,303 @@
+"""The node's scheduling, without ROS: which input set to process, and what to do early.
+
+``endeff_node`` receives colour, depth and camera-info messages on DDS threads and runs the
+tracker on one worker thread. Everything between the two is decided here, so that it can be
+tested by feeding stamped messages (as the synchroniser is), with no DDS:
+
+- **Newest set wins.** Inputs are synchronised by stamp (:mod:`endeff_ros.sync`); a complete set
+  goes into a one-item slot (:class:`~endeff_ros.ros.processing.LatestSlot`) and a set the worker
+  was too slow for is skipped and counted, never queued, so latency cannot grow.
+- **Early work.** While a depth image waits for its colour partner, the worker may already run
+  Sections 3-4 on it (``prepare`` jobs: they need no colour); while a colour image waits for its
+  depth partner, it may compute the optical flow (``prepare_flow`` jobs: they need no depth).
+  A result made early (:class:`Early`) serves only the set it was made for, with the parameters
+  it was made with, and only if the tracker did not change in between.
+- **Colourless frames.** A depth image still without colour after ``color_timeout`` is handed
+  on alone (as the offline bag reader does).
+- **Order and resets.** A set whose depth is not newer than one already handed on is a
+  duplicate. Stamps going back by more than the jump threshold (a bag replayed in a loop), or
+  the ROS clock jumping back, reset the tracker and the synchroniser.
+
+Messages are opaque here: the caller passes ``stamp_of(msg) -> int`` (ns). Thread safety: every
+public method may be called from any thread; the worker calls :meth:`next_job`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from endeff_ros.core.params import EndeffParams
+from endeff_ros.ros.processing import LatestSlot, NodeStats, take_first
+from endeff_ros.sync import ApproximateTimeSynchronizer
+
+#: Seconds without camera info while depth images arrive before the node warns.
+CAMERA_INFO_GRACE_S = 0.5
+
+#: Job names returned by :meth:`Scheduler.next_job`, in the order the worker prefers them.
+JOBS = ('process', 'prepare', 'prepare_flow')
+
+
+@dataclasses.dataclass(frozen=True)
+class Early:
+    """A result computed while its set was incomplete: Sections 3-4 of the depth image
+    (``data``: the frame without colour) or the flow to the colour image (``data``: the RGB
+    array); with the parameters it used and the milliseconds it took."""
+
+    stamp_ns: int
+    data: Any
+    result: Any
+    params: EndeffParams
+    ms: float
+    updates: int = 0  # tracker updates done before it was computed (flow: must be current)
+
+
+class Scheduler:
+    """Synchronises the node's inputs and decides the worker's next job (module docstring).
+
+    ``use_color``: synchronise colour too (else depth and camera info only). ``queue_size`` and
+    ``slop_ns``: the synchroniser's. ``color_timeout_s``: how long a depth image waits for its
+    colour. ``jump_threshold_ns``: stamps going back by more reset. ``stats``: the node's
+    counters (``received``, ``duplicates``, ``colorless``). ``on_event(text)``: informational
+    messages (the node logs them).
+    """
+
+    def __init__(self, *, use_color: bool, queue_size: int, slop_ns: int,
+                 color_timeout_s: float, jump_threshold_ns: int,
+                 stamp_of: Callable[[Any], int], stats: NodeStats | None = None,
+                 on_event: Callable[[str], None] | None = None) -> None:
+        self.inputs = ['color', 'depth', 'camera_info'] if use_color else ['depth',
+                                                                            'camera_info']
+        self.stats = stats or NodeStats()
+        self.color_timeout_s = float(color_timeout_s)
+        self.jump_threshold_ns = int(jump_threshold_ns)
+        self._stamp_of = stamp_of
+        self._on_event = on_event or (lambda text: None)
+        self._lock = threading.Lock()
+        self._slot: LatestSlot[tuple[dict[str, Any], float]] = LatestSlot()
+        # Depth images (with the camera info) waiting for the early Sections 3-4, colour images
+        # waiting for the early flow; the last early result of each.
+        self._early: LatestSlot[tuple[Any, Any]] = self._slot.companion()
+        self._early_color: LatestSlot[tuple[Any, Any]] = self._slot.companion()
+        self._prepared: Early | None = None
+        self._prepared_flow: Early | None = None
+        # Depth stamp whose early Sections 3-4 the worker is running (None: not running).
+        self._estimating_ns: int | None = None
+        self._last_info: Any = None
+        self._first_unpaired_depth: float | None = None
+        self._newest_ns: int | None = None
+        self._reset_pending = False
+        self._params_pending: EndeffParams | None = None
+        self._waiting: dict[int, tuple[Any, float]] = {}  # depth stamp -> (msg, receipt)
+        self._floor_ns: int | None = None  # newest depth stamp handed to the worker
+        self._dropped_before = {k: 0 for k in self.inputs}
+        self._queue_size, self._slop_ns = int(queue_size), int(slop_ns)
+        self._sync = self._make_sync()
+
+    # ------------------------------------------------------------------ synchroniser
+    def _make_sync(self) -> ApproximateTimeSynchronizer:
+        sync = ApproximateTimeSynchronizer(len(self.inputs), self._queue_size, self._slop_ns,
+                                           latched=(self.inputs.index('camera_info'),))
+        if self._last_info is not None:
+            sync.add(self.inputs.index('camera_info'), 0, self._last_info)
+        return sync
+
+    def _replace_sync(self) -> None:
+        """New synchroniser (lock held); keeps the drop counts and the camera info."""
+        for i, kind in enumerate(self.inputs):
+            self._dropped_before[kind] += self._sync.stats.dropped[i]
+        self._sync = self._make_sync()
+
+    def resync(self, queue_size: int, slop_ns: int) -> None:
+        """Use a synchroniser with a new queue size and slop (pending messages are dropped)."""
+        with self._lock:
+            self._queue_size, self._slop_ns = int(queue_size), int(slop_ns)
+            self._replace_sync()
+
+    @property
+    def slop_ns(self) -> int:
+        """The synchroniser's largest stamp difference within a set, ns."""
+        return self._slop_ns
+
+    def dropped(self) -> dict[str, int]:
+        """Messages the synchroniser dropped unpaired, per input."""
+        with self._lock:
+            return {k: self._dropped_before[k] + self._sync.stats.dropped[i]
+                    for i, k in enumerate(self.inputs)}
+
+    @property
+    def skipped(self) -> int:
+        """Complete sets replaced in the slot before the worker took them."""
+        return self._slot.skipped
+
+    @property
+    def sets(self) -> int:
+        """Complete sets handed to the worker's slot."""
+        return self._slot.put_count
+
+    # ------------------------------------------------------------------ inputs
+    def on_input(self, kind: str, msg: Any, receipt: float, *, flow_done: bool = False) -> None:
+        """Take one message of input ``kind`` received at ``receipt`` (monotonic s).
+        ``flow_done``: a colour image whose flow the caller already computed (no early flow)."""
+        stamp = self._stamp_of(msg)
+        with self._lock:
+            self.stats.received[kind] += 1
+            if kind == 'camera_info':
+                self._last_info = msg
+                self._first_unpaired_depth = None
+            elif (self._newest_ns is not None
+                  and stamp < self._newest_ns - self.jump_threshold_ns):
+                self._on_event(f'input stamps jumped back by '
+                               f'{(self._newest_ns - stamp) / 1e9:.3f} s: resetting')
+                self._request_reset()
+                self._newest_ns = stamp
+            else:
+                self._newest_ns = max(stamp, self._newest_ns or stamp)
+            if kind == 'depth' and self._first_unpaired_depth is None:
+                self._first_unpaired_depth = receipt
+            if kind == 'depth' and 'color' in self.inputs:
+                self._waiting[stamp] = (msg, receipt)
+                if self._last_info is not None:
+                    self._early.put((msg, self._last_info))
+            ready = [self._claim(dict(zip(self.inputs, found)))
+                     for found in self._sync.add(self.inputs.index(kind), stamp, msg)]
+            if (kind == 'color' and not ready and not flow_done
+                    and self._last_info is not None):
+                self._early_color.put((msg, self._last_info))
+        for msgs in ready:
+            if msgs is not None:
+                self._slot.put((msgs, receipt))
+
+    def _claim(self, msgs: dict[str, Any]) -> dict[str, Any] | None:
+        """Accept a set unless its depth is not newer than one already handed on (lock held)."""
+        stamp = self._stamp_of(msgs['depth'])
+        for old in [s for s in self._waiting if s <= stamp]:
+            del self._waiting[old]
+        if self._floor_ns is not None and stamp <= self._floor_ns:
+            self.stats.duplicates += 1
+            return None
+        self._floor_ns = stamp
+        return msgs
+
+    def flush_colorless(self, now: float) -> None:
+        """Hand on the newest depth image that waited ``color_timeout_s`` for its colour."""
+        with self._lock:
+            expired = sorted(s for s, (_, t) in self._waiting.items()
+                             if now - t > self.color_timeout_s)
+            if not expired or self._last_info is None:
+                return
+            msg, receipt = self._waiting[expired[-1]]
+            for stamp in expired:
+                del self._waiting[stamp]
+            msgs = self._claim({'color': None, 'depth': msg, 'camera_info': self._last_info})
+            self.stats.colorless += msgs is not None
+        if msgs is not None:
+            self._slot.put((msgs, receipt))
+
+    def missing_camera_info(self, now: float) -> bool:
+        """Depth images have waited more than ``CAMERA_INFO_GRACE_S`` with no camera info."""
+        first = self._first_unpaired_depth
+        return self._last_info is None and first is not None and (
+            now - first > CAMERA_INFO_GRACE_S)
+
+    # ------------------------------------------------------------------ resets, parameters
+    def _request_reset(self) -> None:
+        """Forget the tracks and the synchroniser state (lock held)."""
+        self._reset_pending = True
+        self._waiting.clear()
+        self._floor_ns = None
+        self._replace_sync()
+        self._slot.clear()
+
+    def request_reset(self) -> None:
+        """Reset the tracker before the next set, and forget the pending inputs."""
+        with self._lock:
+            self._request_reset()
+
+    def change_params(self, params: EndeffParams) -> None:
+        """The tracker takes ``params`` before the next set; early work waits until then."""
+        with self._lock:
+            self._params_pending = params
+
+    def begin_set(self) -> tuple[EndeffParams | None, bool]:
+        """What the worker applies before processing a set: (new parameters or None, whether
+        to reset the tracker). Each is returned once; early results are forgotten on reset."""
+        with self._lock:
+            params, self._params_pending = self._params_pending, None
+            reset, self._reset_pending = self._reset_pending, False
+            if reset:
+                self._prepared = self._prepared_flow = None
+            return params, reset
+
+    # ------------------------------------------------------------------ the worker's jobs
+    def next_job(self, timeout: float) -> tuple[str, tuple[Any, ...]] | None:
+        """``(job, args)``: ``('process', (msgs, receipt))``, ``('prepare', (depth, info))``
+        or ``('prepare_flow', (color, info))``, preferring complete sets; None after
+        ``timeout`` s without any, or once closed."""
+        got = take_first([self._slot, self._early, self._early_color], timeout=timeout)
+        return None if got is None else (JOBS[got[0]], got[1])
+
+    def begin_estimate(self, depth: Any) -> bool:
+        """May the worker run the early Sections 3-4 of ``depth`` now? (Not while parameters
+        or a reset are pending, nor for a depth image older than one already handed on.)"""
+        stamp = self._stamp_of(depth)
+        with self._lock:
+            if (self._params_pending is not None or self._reset_pending
+                    or (self._floor_ns is not None and stamp <= self._floor_ns)):
+                return False
+            self._estimating_ns = stamp
+            return True
+
+    def end_estimate(self, early: Early | None) -> None:
+        """The early Sections 3-4 finished (``early``: its result, None if unusable)."""
+        with self._lock:
+            self._estimating_ns = None
+        if early is not None:
+            self._prepared = early
+
+    def may_flow(self) -> bool:
+        """May an early optical flow run now (no parameters or reset pending)?"""
+        with self._lock:
+            return self._params_pending is None and not self._reset_pending
+
+    def flow_alongside_info(self, stamp_ns: int) -> Any:
+        """The camera info if the worker is estimating the depth partner of a colour image
+        stamped ``stamp_ns`` (so its flow can run alongside, on another core), else None."""
+        with self._lock:
+            estimating, info = self._estimating_ns, self._last_info
+            if estimating is None or info is None or abs(stamp_ns - estimating) > self._slop_ns:
+                return None
+            return info
+
+    def store_flow(self, early: Early) -> None:
+        """An early optical flow result, for the set of its colour image."""
+        self._prepared_flow = early
+
+    def take_early(self, msgs: dict[str, Any], params: EndeffParams,
+                   updates: int) -> tuple[Early | None, Early | None]:
+        """The early estimate and flow made for exactly this set, with ``params``, and (flow)
+        with the tracker as it is after ``updates`` updates; both slots are emptied, since an
+        early result serves only the next set processed."""
+        early, self._prepared = self._prepared, None
+        flow, self._prepared_flow = self._prepared_flow, None
+        early = early if early and self._fits(early, msgs['depth'], params) else None
+        flow = flow if (flow and self._fits(flow, msgs.get('color'), params)
+                        and flow.updates == updates) else None
+        return early, flow
+
+    def _fits(self, early: Early, msg: Any, params: EndeffParams) -> bool:
+        """Made for this image, with these parameters."""
+        return msg is not None and early.params is params and early.stamp_ns == self._stamp_of(
+            msg)
+
+    # ------------------------------------------------------------------ shutdown
+    def close(self) -> None:
+        """Wake and stop the worker."""
+        for slot in (self._slot, self._early, self._early_color):
+            slot.close()
+
+    @property
+    def closed(self) -> bool:
+        return self._slot.closed

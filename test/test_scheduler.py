@@ -1,0 +1,212 @@
+"""The node's scheduling without DDS: stamped messages in, the worker's jobs out."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import pytest
+
+from endeff_ros.core.params import EndeffParams
+from endeff_ros.ros.scheduler import CAMERA_INFO_GRACE_S, Early, Scheduler
+
+MS = 1_000_000
+
+
+@dataclass(frozen=True)
+class Msg:
+    kind: str
+    stamp: int
+
+
+def make(**kw: object) -> Scheduler:
+    args = {'use_color': True, 'queue_size': 10, 'slop_ns': 15 * MS, 'color_timeout_s': 0.1,
+            'jump_threshold_ns': 1000 * MS, 'stamp_of': lambda m: m.stamp}
+    args.update(kw)
+    return Scheduler(**args)  # type: ignore[arg-type]
+
+
+def feed(s: Scheduler, kind: str, stamp_ms: float, receipt: float = 0.0, **kw: bool) -> Msg:
+    msg = Msg(kind, round(stamp_ms * MS))
+    s.on_input(kind, msg, receipt, **kw)
+    return msg
+
+
+def drain(s: Scheduler) -> list[tuple[str, tuple]]:
+    jobs = []
+    while (job := s.next_job(timeout=0.0)) is not None:
+        jobs.append(job)
+    return jobs
+
+
+def test_a_complete_set_is_processed() -> None:
+    s = make()
+    info = feed(s, 'camera_info', 0)
+    color = feed(s, 'color', 100)
+    depth = feed(s, 'depth', 102)
+    jobs = drain(s)
+    assert jobs[0][0] == 'process'
+    msgs, _ = jobs[0][1]
+    assert msgs == {'color': color, 'depth': depth, 'camera_info': info}
+    assert s.stats.received == {'color': 1, 'depth': 1, 'camera_info': 1}
+
+
+def test_early_work_while_a_partner_is_awaited() -> None:
+    s = make()
+    info = feed(s, 'camera_info', 0)
+    depth = feed(s, 'depth', 100)
+    assert drain(s) == [('prepare', (depth, info))]  # Sections 3-4 need no colour
+    color = feed(s, 'color', 133)
+    assert drain(s) == [('prepare_flow', (color, info))]  # the flow needs no depth
+    # A colour image whose flow the caller computed alongside gets no early-flow job.
+    feed(s, 'color', 166, flow_done=True)
+    assert drain(s) == []
+
+
+def test_the_newest_set_wins_and_skips_are_counted() -> None:
+    s = make()
+    feed(s, 'camera_info', 0)
+    for k in range(3):
+        feed(s, 'color', 100 + 33 * k)
+        feed(s, 'depth', 101 + 33 * k)
+    process = [args for job, args in drain(s) if job == 'process']
+    assert len(process) == 1
+    assert process[0][0]['depth'].stamp == 167 * MS
+    assert s.skipped == 2 and s.sets == 3
+
+
+def test_depth_without_colour_is_processed_after_the_timeout() -> None:
+    s = make(color_timeout_s=0.1)
+    feed(s, 'camera_info', 0)
+    depth = feed(s, 'depth', 100, receipt=10.0)
+    drain(s)
+    s.flush_colorless(10.05)
+    assert drain(s) == []
+    s.flush_colorless(10.2)
+    (job, (msgs, receipt)), = drain(s)
+    assert job == 'process' and msgs['color'] is None and msgs['depth'] is depth
+    assert receipt == 10.0 and s.stats.colorless == 1
+    # Its colour arriving late makes no second set of the same depth image.
+    feed(s, 'color', 101)
+    assert [j for j, _ in drain(s) if j == 'process'] == []
+
+
+def test_without_colour_depth_and_info_make_a_set() -> None:
+    s = make(use_color=False)
+    assert s.inputs == ['depth', 'camera_info']
+    feed(s, 'camera_info', 0)
+    depth = feed(s, 'depth', 100)
+    (job, (msgs, _)), = drain(s)
+    assert job == 'process' and msgs['depth'] is depth
+
+
+def test_stamps_jumping_back_reset_once() -> None:
+    events: list[str] = []
+    s = make(jump_threshold_ns=1000 * MS, on_event=events.append)
+    feed(s, 'camera_info', 0)
+    feed(s, 'color', 5000)
+    feed(s, 'depth', 5000)
+    drain(s)
+    assert s.begin_set() == (None, False)
+    feed(s, 'color', 4500)  # back by less than the threshold: no reset
+    assert s.begin_set() == (None, False)
+    feed(s, 'color', 100)
+    feed(s, 'depth', 100)
+    assert events and 'jumped back' in events[0]
+    assert s.begin_set() == (None, True)
+    assert s.begin_set() == (None, False)
+    # After the reset the older stamps form sets again.
+    assert any(j == 'process' for j, _ in drain(s))
+
+
+def test_a_set_not_newer_than_the_last_is_a_duplicate() -> None:
+    s2 = make()
+    feed(s2, 'camera_info', 0)
+    feed(s2, 'depth', 300, receipt=1.0)
+    s2.flush_colorless(2.0)  # handed on without colour
+    feed(s2, 'depth', 300, receipt=2.0)
+    feed(s2, 'color', 300)  # the same depth stamp again, now with colour
+    assert s2.stats.duplicates == 1
+
+
+def test_parameters_change_before_the_next_set_and_hold_early_work() -> None:
+    s = make()
+    feed(s, 'camera_info', 0)
+    depth = feed(s, 'depth', 100)
+    new = EndeffParams()
+    s.change_params(new)
+    assert not s.begin_estimate(depth) and not s.may_flow()
+    assert s.begin_set() == (new, False)
+    assert s.begin_estimate(depth) and s.may_flow()
+
+
+def test_early_results_serve_only_their_own_set() -> None:
+    s = make()
+    params = EndeffParams()
+    info = feed(s, 'camera_info', 0)
+    depth = feed(s, 'depth', 100)
+    assert s.begin_estimate(depth)
+    s.end_estimate(Early(depth.stamp, 'frame', 'estimate', params, 1.0))
+    color = feed(s, 'color', 101)
+    s.store_flow(Early(color.stamp, 'rgb', 'flow', params, 1.0, updates=3))
+    msgs = {'color': color, 'depth': depth, 'camera_info': info}
+    early, flow = s.take_early(msgs, params, updates=3)
+    assert early.result == 'estimate' and flow.result == 'flow'
+    assert s.take_early(msgs, params, updates=3) == (None, None)  # used once
+    # Another set, other parameters or a tracker updated since: not used.
+    s.end_estimate(Early(depth.stamp, 'frame', 'estimate', params, 1.0))
+    s.store_flow(Early(color.stamp, 'rgb', 'flow', params, 1.0, updates=3))
+    early, flow = s.take_early(msgs, params, updates=4)
+    assert early.result == 'estimate' and flow is None  # the tracker changed since the flow
+    s.end_estimate(Early(depth.stamp, 'frame', 'estimate', params, 1.0))
+    assert s.take_early(msgs, EndeffParams(), updates=3) == (None, None)
+    other = {'color': color, 'depth': Msg('depth', 133 * MS), 'camera_info': info}
+    s.end_estimate(Early(depth.stamp, 'frame', 'estimate', params, 1.0))
+    assert s.take_early(other, params, updates=3)[0] is None
+
+
+def test_the_flow_runs_alongside_only_while_its_depth_partner_is_estimated() -> None:
+    s = make(slop_ns=15 * MS)
+    info = feed(s, 'camera_info', 0)
+    depth = feed(s, 'depth', 100)
+    assert s.flow_alongside_info(101 * MS) is None
+    assert s.begin_estimate(depth)
+    assert s.flow_alongside_info(101 * MS) is info
+    assert s.flow_alongside_info(130 * MS) is None  # outside the slop: not its partner
+    s.end_estimate(None)
+    assert s.flow_alongside_info(101 * MS) is None
+
+
+def test_missing_camera_info_is_noticed_after_a_grace_period() -> None:
+    s = make()
+    feed(s, 'depth', 100, receipt=5.0)
+    assert not s.missing_camera_info(5.0 + CAMERA_INFO_GRACE_S / 2)
+    assert s.missing_camera_info(5.0 + CAMERA_INFO_GRACE_S * 2)
+    feed(s, 'camera_info', 0, receipt=6.0)
+    assert not s.missing_camera_info(7.0)
+
+
+def test_resync_keeps_drop_counts_and_camera_info() -> None:
+    s = make(queue_size=1)
+    feed(s, 'camera_info', 0)
+    feed(s, 'depth', 100)
+    feed(s, 'depth', 133)  # pushes the first out of a 1-message queue
+    assert s.dropped()['depth'] == 1
+    s.resync(queue_size=5, slop_ns=30 * MS)
+    assert s.slop_ns == 30 * MS and s.dropped()['depth'] >= 1
+    feed(s, 'color', 200)
+    feed(s, 'depth', 225)  # 25 ms apart: pairs with the new slop, camera info kept
+    assert any(j == 'process' for j, _ in drain(s))
+
+
+def test_close_wakes_the_worker() -> None:
+    s = make()
+    s.close()
+    assert s.closed and s.next_job(timeout=5.0) is None
+
+
+@pytest.mark.parametrize('kind', ['color', 'depth'])
+def test_received_counts_every_input(kind: str) -> None:
+    s = make()
+    for k in range(4):
+        feed(s, kind, 100 + 33 * k)
+    assert s.stats.received[kind] == 4
