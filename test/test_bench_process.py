@@ -3,15 +3,11 @@
 from __future__ import annotations
 
 import pytest
-from bag_helpers import real_core  # noqa: F401 - fixture
 
 from tools.bench_process import bench_process
 
-pytest.importorskip('rclpy')
 
-
-@pytest.mark.slow
-@pytest.mark.usefixtures('real_core')
+@pytest.mark.integration
 def test_bench_process_reports_both_runs() -> None:
     result = bench_process(frames=3, bags=2)
     assert result['width'] == 640 and result['height'] == 480

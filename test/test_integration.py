@@ -9,16 +9,10 @@ the offline evaluation of the same bag.
 
 from __future__ import annotations
 
-import importlib.util
-
 import numpy as np
 import pytest
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
-
-if importlib.util.find_spec('endeff_ros.synth') is None:  # pragma: no cover
-    pytest.skip('endeff_ros.synth (synthetic benchmark bags) is not available yet',
-                allow_module_level=True)
+pytestmark = pytest.mark.integration
 
 SEQUENCE = 'punching'  # occlusions: recall well below 1, so the comparison means something
 

@@ -70,8 +70,8 @@ def _layer(module: str) -> int:
         return 3
     if module.startswith('endeff_ros.core') or module == 'endeff_ros':
         return 0
-    if module in ('endeff_ros.ros.node', 'endeff_ros.evaluate') or module.startswith(
-            ('endeff_ros.ros.processing', 'endeff_ros.ros.ros_params')):
+    if module in ('endeff_ros.ros.node', 'endeff_ros.ros.scheduler', 'endeff_ros.evaluate',
+                  'endeff_ros.ros.processing', 'endeff_ros.ros.ros_params'):
         return 2
     return 1
 

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import itertools
-import os
 import time
 
 import numpy as np
 import pytest
+import rclpy
 from ros_helpers import image_msg, info_msg, spin_until
 
 from endeff_ros.core.errors import InputError
@@ -18,9 +18,7 @@ from endeff_ros.core.types import RGBDFrame, Track
 from endeff_ros.ros import convert
 from endeff_ros.ros.processing import LatestSlot
 
-rclpy = pytest.importorskip('rclpy')
-
-pytestmark = pytest.mark.ros
+pytestmark = pytest.mark.integration
 
 W, H = 32, 24
 FRAME_ID = 'camera_depth_optical_frame'
@@ -61,14 +59,6 @@ class FakeTracker:
                                  entity=np.zeros(1, int), unreachable=0, entities=[
                                      EntityEstimate(0, root, [], None, np.zeros(1, int))])
         return TrackerResult(frame.stamp_ns, frame.frame_id, tracks, estimate)
-
-
-@pytest.fixture(scope='session')
-def ros_context():
-    # A private domain: other test runs on this machine (and their /diagnostics) stay apart.
-    rclpy.init(domain_id=200 + os.getpid() % 30)
-    yield
-    rclpy.shutdown()
 
 
 class Harness:
@@ -370,11 +360,11 @@ def test_sim_time_jumping_back_resets_tracker(harness):
 
 def test_real_tracker_on_a_synthetic_person(ros_context):
     """Default tracker factory (the real core) end to end in-process."""
-    synth = pytest.importorskip('endeff_ros.synth')
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
+    from endeff_ros import synth
     from endeff_ros.ros.node import EndeffNode
 
     frame = synth.render_person_frame('t_pose')

@@ -426,7 +426,7 @@ def _rendered(name: str, *, quick: bool = False):
 # -- 7. The synthetic 'clapping' sequence: temporal recall above single-frame recall ------------
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 def test_clapping_sequence_temporal_recall_beats_single_frame():
     params = EndeffParams(keep_frames=5)
     tracker = Tracker(params)

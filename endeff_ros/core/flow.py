@@ -7,47 +7,14 @@ Displacement Optical Flow (LDOF), which is not in OpenCV; :class:`FlowEstimator`
 OpenCV's DIS (Kroeger et al., 2016) and Farneback (2003) instead, and :func:`propagate_points`
 turns the flow into the predicted 3D positions E_{t+1}^{pr}.
 
-Choice of the default (measured)
---------------------------------
-Synthetic 640x480 pairs with exact flow (:mod:`tools.flow_eval`): a textured blob
-(160x100 px, a forearm and hand at ~2 m) moving by 2-25 px with up to 4 deg rotation and 4 %
-scale over a textured static background (a torso: motion discontinuity, occlusions not scored),
-plus a whole-image pan; 3 textures per case, sensor noise sigma 2. EPE = endpoint error in px
-(mean over all scored pixels; at the moving object), time = median single-thread call of
-:meth:`FlowEstimator.flow` (``cv2.setNumThreads(1)``, grayscale conversion and resizing
-included). Produced by::
-
-    .venv/bin/python -m tools.flow_eval --repeats 15
-
-=============  =====  ========  ========  =========  =======  ===============================
-method         scale  EPE mean  EPE obj   obj worst  ms 1 th  obj EPE by case 2/5/10/15/25 px
-=============  =====  ========  ========  =========  =======  ===============================
-dis_ultrafast  1.0    0.13      1.59      6.95       3.80     0.40 0.72 1.22 2.21 3.39
-dis_ultrafast  0.5    0.29      4.49      23.17      2.29     0.81 1.67 2.93 5.34 11.69
-dis_fast       1.0    0.11      1.52      6.69       7.33     0.40 0.67 1.13 1.99 3.41
-dis_fast       0.5    0.31      5.85      24.90      2.26     0.99 2.17 2.95 5.61 17.53
-dis_medium     1.0    0.05      0.46      0.93       37.01    0.15 0.26 0.41 0.80 0.69
-dis_medium     0.5    0.12      1.68      10.93      9.35     0.39 0.66 1.09 1.67 4.58
-farneback      1.0    0.19      3.49      24.84      68.46    0.17 0.38 0.95 3.96 12.01
-farneback      0.5    0.20      3.73      25.06      23.59    0.28 0.66 1.31 4.20 12.18
-=============  =====  ========  ========  =========  =======  ===============================
-
-(Python 3.11, OpenCV 5.0.0, 2-core VM shared with other jobs: times vary by ~0.5 ms run to run
-on an idle machine; an earlier run gave 1.72 ms for dis_ultrafast at 0.5 and 2.55 ms for
-dis_fast at 0.5. A later run with the machine loaded by other jobs scaled every time by 1.5-3x
-(dis_ultrafast 0.5: 3.3 ms, dis_fast 0.5: 7.5 ms) with the same ranking. EPE is deterministic.)
-
-Decision. The flow budget in the full pipeline is about 3 ms per frame on one core (pipeline
-<= 12 ms). Farneback is out (17-68 ms, and it loses large motions: 12 px error at 25 px).
-DIS MEDIUM is the most accurate but costs 9-37 ms. DIS ULTRAFAST/FAST at full resolution are
-accurate (1.5-1.6 px at the object) but cost 3.8-7 ms, over budget. Of the two that fit, DIS
-ULTRAFAST at scale 0.5 is the default (``method='dis'``, ``scale=0.5``): it is as fast as FAST
-at 0.5 or faster and more accurate at the moving object in every case (4.5 vs 5.9 px mean). Its
-error grows with the displacement: below 1 px at 2 px motion, ~3 px at 10 px (about 1 cm at
-2 m with f = 525 px), 5-12 px at 15-25 px (fast punches, 2-3 m/s at 30 Hz). Those are still
-inside the tracker's rectification distance, and the update phase relies on the current
-detection rather than on the prediction whenever one exists. With more time per frame,
-``FlowEstimator('dis_ultrafast', scale=1.0)`` cuts the object error by 3x for ~1.5 ms more.
+Why DIS ULTRAFAST at half resolution (the default): the flow budget in the full pipeline is
+about 3 ms per frame on one core. Farneback costs several times that and loses large motions;
+DIS MEDIUM is the most accurate and the slowest; of the presets that fit the budget, DIS
+ULTRAFAST at scale 0.5 is the fastest and the most accurate at a moving limb. Its error grows
+with the displacement (a few pixels for fast punches), which stays inside the tracker's
+rectification distance, and the update phase prefers a current detection to a prediction
+whenever one exists. The measured table (``python -m tools.flow_eval``) is in
+docs/design.md.
 """
 
 from __future__ import annotations
@@ -283,9 +250,8 @@ def propagate_points(points: npt.ArrayLike, flow: npt.NDArray[np.float32],
     legs; the flow of a small fast part is underestimated): its window reads the farther
     surface as a depth change, and the point would be carried onto the legs and stay there.
     Receding more than the tolerance in one frame (3 m/s at 30 Hz with 0.1 m) is rare for
-    a body part, approaching faster is kept (the neighbourhood Δz rule above). Measured on
-    the synthetic set (``make eval``): temporal FPR 0.048 -> 0.041 (bending 0.164 -> 0.118),
-    recall 0.951 -> 0.952.
+    a body part, approaching faster is kept (the neighbourhood Δz rule above). Its effect on
+    the benchmark is in docs/design.md.
 
     Vectorised over points (window gathers by fancy indexing; the large window only for the
     points that need it): about 0.5 ms for 20 points on one core.

@@ -188,13 +188,10 @@ NODE_NAME = 'endeff_node'
 
 #: Named parameter sets shipped as ``config/endeff_<name>.yaml`` (besides ``config/endeff.yaml``,
 #: the defaults). ``fast``: 4 cm voxels (932 instead of 1394 points on the benchmark frame),
-#: the sub-band sizes scaled with the voxel area; δ_L and λ unchanged. Measured on the
-#: synthetic benchmark (see the README): temporal recall 0.953 against 0.966, occlusion group
-#: 0.931 against 0.949, FPR 0.036 against 0.027, error 3.7 against 3.2 cm, about 0.75x the time
-#: per frame; too coarse for the 5 cm tip tests on the unit-test shapes, so not the default.
-#: (A first version also scaled δ_L and λ and median-filtered the depth: as fast, recall 0.929.)
-#: Its smaller sub-bands cut a limb into more pieces, so a chain below g needs 4 sub-bands
-#: (with 3: recall 0.956 at FPR 0.038; with 4: 0.953 at 0.036; without chains: 0.949 at 0.037).
+#: the sub-band sizes scaled with the voxel area; δ_L and λ unchanged. It trades some accuracy
+#: for about 0.7x the time per frame (docs/results.md), and its 4 cm cells are too coarse for
+#: the 5 cm tip tests on the unit-test shapes, so it is not the default. Its smaller sub-bands
+#: cut a limb into more pieces, so a chain below g needs 4 sub-bands (docs/design.md).
 PRESETS: dict[str, dict[str, Any]] = {
     'fast': {'voxel_size': 0.04, 'subband_max_points': 34, 'subband_min_points': 4,
              'chain_subbands': 4},

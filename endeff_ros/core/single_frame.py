@@ -268,12 +268,9 @@ def _tip_positions(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp
     Along the part's axis (in the image plane) the centre is one radius inside the extreme,
     the 2 % quantile of the tip points along that axis: the centre of the rounded end,
     wherever the tip region's centroid falls. Set ``max_part_radius`` to 0 to report the
-    surface centroid. (Measured on the synthetic set: mean error from ~6 cm to ~3 cm, see the
-    README. An earlier rule never moved the centre outwards past the tip region's centroid;
-    moving it both ways took temporal recall from 0.952 to 0.957 and FPR from 0.041 to 0.035
-    at 3.3 instead of 3.1 cm mean error, and brings two chair-leg tips of the tests under
-    5 cm.) All end-effectors of the frame at once: per-point arrays labelled by end-effector,
-    bincounts and one sort per quantile (one pass per end-effector cost ~0.2 ms each).
+    surface centroid (docs/design.md: what the centre model buys). All end-effectors of the
+    frame at once: per-point arrays labelled by end-effector, bincounts and one sort per
+    quantile (one pass per end-effector cost ~0.2 ms each).
     """
     m = len(paths)
     if m == 0:

@@ -266,9 +266,8 @@ class Tracker:
         frame": Eq. 7 through the mid-band of the track's path when it was last detected,
         dist_E(e^pr, mid_t) + dist_E(mid_t, L_0^0) with the current root. (Eq. 7 through the
         current graph's path instead gives a fist back on the chest the chest's short
-        distance, and the elbow, now the arm's extremum, wins case B: measured on the synthetic
-        set, temporal recall 0.945 -> 0.951, occlusion group 0.891 -> 0.912, FPR 0.054 ->
-        0.048.) A track without a stored path uses the current graph's path.
+        distance, and the elbow, now the arm's extremum, wins case B; docs/design.md.) A track
+        without a stored path uses the current graph's path.
         """
         if entity < 0 or estimate.graph is None:
             return np.nan

@@ -2,10 +2,9 @@
 
 The first frame a fresh process handles costs several times a later one: first calls into
 scipy and OpenCV, the optical-flow object's first run and the first large allocations. In the
-node, measured with ``python -m tools.latency_bench`` (30 Hz), the first frame took
-48 ms and the second's optical flow 9 ms, so a live camera's first frames arrived while the
-worker was busy and were skipped (1-2 dropped frames per run: frames 0-1 in the runs
-checked). The node pays this before it subscribes instead.
+node at 30 Hz the first frame took several frame periods, so a live camera's first frames
+arrived while the worker was busy and were skipped. The node pays this before it subscribes
+instead (docs/design.md).
 """
 
 from __future__ import annotations

@@ -133,8 +133,7 @@ class EndeffNode(Node):
             return
         self.get_logger().debug(f'warm-up took {(time.perf_counter() - t0) * 1e3:.0f} ms')
         # Startup objects (modules, messages, the warm-up's arrays) move out of the collector's
-        # generations, so its full passes during the stream are shorter: in 3 alternating
-        # pairs of latency_bench runs, p95 0.3-1.7 ms lower above the relay, p99 1-4 ms lower.
+        # generations, so its full passes during the stream are shorter (docs/design.md).
         gc.collect()
         gc.freeze()
 
@@ -353,7 +352,7 @@ class EndeffNode(Node):
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run endeff_ros endeff_node``."""
     # One OpenCV thread: the node already runs DDS, executor and worker threads, and on a
-    # robot's shared CPU a second flow thread only adds contention (measured: latency_bench).
+    # robot's shared CPU a second flow thread only adds contention.
     cv2.setNumThreads(1)
     spin(EndeffNode, args)
 
