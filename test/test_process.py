@@ -16,7 +16,6 @@ from bag_helpers import (
     write_bag,
 )
 
-from endeff_ros.bag import process as proc
 from endeff_ros.bag.errors import BagError
 from endeff_ros.bag.process import OUTPUT_CLOUD, OUTPUT_MARKERS, process_bag, process_bags
 from endeff_ros.bag.reader import read_frames
@@ -49,14 +48,17 @@ def _mcap_messages(path: Path) -> list[tuple[str, str, int, Any]]:
 
 
 def _check_outputs(msgs: list[tuple[str, str, int, Any]], stamps: list[int],
-                   expect: dict[int, np.ndarray] | None = None) -> None:
+                   expect: dict[int, np.ndarray] | None = None, markers: bool = True) -> None:
     clouds = [(log, m) for t, typ, log, m in msgs if t == OUTPUT_CLOUD]
-    markers = [(log, m) for t, typ, log, m in msgs if t == OUTPUT_MARKERS]
+    marker_msgs = [(log, m) for t, typ, log, m in msgs if t == OUTPUT_MARKERS]
     types = {t: typ.replace('/msg/', '/') for t, typ, _, _ in msgs}
     assert types[OUTPUT_CLOUD] == 'sensor_msgs/PointCloud2'
-    assert types[OUTPUT_MARKERS] == 'visualization_msgs/MarkerArray'
     assert [convert.stamp_to_ns(m.header.stamp) for _, m in clouds] == stamps
-    assert [convert.stamp_to_ns(m.markers[0].header.stamp) for _, m in markers] == stamps
+    if markers:
+        assert types[OUTPUT_MARKERS] == 'visualization_msgs/MarkerArray'
+        assert [convert.stamp_to_ns(m.markers[0].header.stamp) for _, m in marker_msgs] == stamps
+    else:
+        assert OUTPUT_MARKERS not in types
     for log, m in clouds:
         assert m.header.frame_id == FRAME_ID
         # Log time = the input depth message's log time (stamp + 7 ms in the test bags).
@@ -69,7 +71,7 @@ def _check_outputs(msgs: list[tuple[str, str, int, Any]], stamps: list[int],
             want = expect[convert.stamp_to_ns(m.header.stamp)]
             np.testing.assert_allclose(convert.xyz(pts), want, atol=1e-6)
             assert pts['id'].tolist() == [0, 1, 2]
-    for _, m in markers:
+    for _, m in marker_msgs:
         assert m.markers[0].action == 3  # DELETEALL
         spheres = [k for k in m.markers if k.ns == convert.NS_EFFECTOR]
         assert len(spheres) == 3 and all(k.header.frame_id == FRAME_ID for k in spheres)
@@ -92,7 +94,7 @@ def test_output_bag_read_back(tmp_path: Path, in_storage: str, out_storage: str)
     src = tmp_path / 'in'
     truth = write_bag(src, BagSpec(frames=6, storage=in_storage, drop_color={2}))
     out = tmp_path / 'out'
-    res = process_bag(src, out, storage=out_storage, tracker_factory=FakeTracker)
+    res = process_bag(src, out, storage=out_storage, markers=True, tracker_factory=FakeTracker)
     assert res.error is None and res.frames == 6
     stamps = sorted(truth)
     expect = _direct(src)
@@ -101,6 +103,13 @@ def test_output_bag_read_back(tmp_path: Path, in_storage: str, out_storage: str)
     _check_outputs(msgs, stamps, expect)
     if out_storage == 'mcap':
         _check_outputs(_mcap_messages(out), stamps, expect)
+    # Without --markers (the default) the clouds are the same messages, and nothing else.
+    plain = tmp_path / 'plain'
+    process_bag(src, plain, storage=out_storage, tracker_factory=FakeTracker)
+    plain_msgs = _rosbags_messages(plain)
+    _check_outputs(plain_msgs, stamps, expect, markers=False)
+    assert [(log, m.data.tobytes()) for t, _, log, m in plain_msgs] == [
+        (log, m.data.tobytes()) for t, _, log, m in msgs if t == OUTPUT_CLOUD]
     # The colour-less frame is processed (FakeTracker marks it PREDICTED).
     states = [convert.cloud_to_array(m)['state'].tolist() for t, _, _, m in msgs
               if t == OUTPUT_CLOUD]
@@ -112,7 +121,7 @@ def test_copy_input(tmp_path: Path, storage: str) -> None:
     src = tmp_path / 'in'
     truth = write_bag(src, BagSpec(frames=5, storage=storage))
     out = tmp_path / 'out'
-    process_bag(src, out, copy_input=True, tracker_factory=FakeTracker)
+    process_bag(src, out, copy_input=True, markers=True, tracker_factory=FakeTracker)
     for msgs in (_rosbags_messages(out), _mcap_messages(out)):
         topics = [t for t, *_ in msgs]
         assert sorted(set(topics)) == sorted({*TOPICS.values(), OUTPUT_CLOUD, OUTPUT_MARKERS})
@@ -140,7 +149,7 @@ def test_never_overwrites_without_force(tmp_path: Path) -> None:
     other = tmp_path / 'precious'
     other.mkdir()
     (other / 'thesis.tex').write_text('x')
-    with pytest.raises(BagError, match='not a rosbag2 bag'):
+    with pytest.raises(BagError, match='not a bag written by endeff process'):
         process_bag(src, other, force=True, tracker_factory=FakeTracker)
     assert (other / 'thesis.tex').exists()
     with pytest.raises(BagError, match='input'):
@@ -183,9 +192,11 @@ def test_cli_several_bags_one_bad(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     assert '\r' not in cap.err  # no progress bar when stderr is not a TTY
     n = sum(1 for t, *_ in _rosbags_messages(out / 'good_b') if t == OUTPUT_CLOUD)
     assert n == 5
-    # Again: every output exists -> refused (status 1), with --force -> replaced (status 0).
-    assert cli_main(['process', *ins[::2], '-o', str(out)]) == 1
-    assert 'use --force' in capsys.readouterr().err
+    # Again: every output exists -> refused before any work (status 2), with --force ->
+    # replaced (status 0).
+    assert cli_main(['process', *ins[::2], '-o', str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count('use --force') == 2 and 'FAILED' not in err
     assert cli_main(['process', *ins[::2], '-o', str(out), '--force', '--storage',
                      'sqlite3']) == 0
     assert list((out / 'good_a').glob('*.db3'))
@@ -197,14 +208,6 @@ def test_same_output_names_are_an_error(tmp_path: Path) -> None:
     res = process_bags([tmp_path / 'a' / 'seq', tmp_path / 'b' / 'seq'], tmp_path / 'out',
                        tracker_factory=FakeTracker)
     assert all(r.error and 'same output' in r.error for r in res)
-
-
-def test_progress_line() -> None:
-    bar = proc.Progress(100, enabled=False)
-    bar.t0 -= 2.0
-    bar.update(50)
-    line = bar.line()
-    assert '50/100 frames' in line and 'frames/s' in line and 'ETA 0:0' in line
 
 
 @pytest.mark.usefixtures('real_core')

@@ -22,8 +22,10 @@ yielded, with ``color=None`` (the tracker falls back to predicting without optic
 
 from __future__ import annotations
 
+import functools
 import heapq
 import itertools
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -37,7 +39,7 @@ from .errors import BagError
 
 if TYPE_CHECKING:
     import argparse
-    from collections.abc import Iterable, Iterator
+    from collections.abc import Callable, Iterable, Iterator
 
     import numpy.typing as npt
 
@@ -81,6 +83,8 @@ class ReaderOptions:
     slop_s: float = 0.015
     queue_size: int = 10
     reorder_window_s: float = 1.0
+    #: Refuse truncated or corrupt bags instead of reading them up to the last good message.
+    strict: bool = False
 
 
 def add_reader_arguments(parser: argparse.ArgumentParser) -> None:
@@ -94,13 +98,17 @@ def add_reader_arguments(parser: argparse.ArgumentParser) -> None:
                    help='colour/depth synchronisation slop in seconds (default 0.015)')
     g.add_argument('--queue-size', type=int, default=10, metavar='N',
                    help='synchroniser queue size per input (default 10)')
+    g.add_argument('--strict', action='store_true',
+                   help='refuse truncated or corrupt bags (default: read them up to the last '
+                        'readable message, with a warning naming what was lost)')
 
 
 def options_from_args(args: argparse.Namespace) -> ReaderOptions:
     """:class:`ReaderOptions` from the parsed :func:`add_reader_arguments` options."""
     return ReaderOptions(color_topic=args.color_topic, depth_topic=args.depth_topic,
                          info_topic=args.info_topic, gt_topic=args.gt_topic,
-                         slop_s=float(args.slop), queue_size=int(args.queue_size))
+                         slop_s=float(args.slop), queue_size=int(args.queue_size),
+                         strict=bool(getattr(args, 'strict', False)))
 
 
 @dataclass(frozen=True)
@@ -135,6 +143,10 @@ class ReadStats:
     dropped: dict[str, int] = field(default_factory=dict)
     gt_messages: int = 0
     gt_matched: int = 0
+    #: Topic -> (messages read, messages the bag's metadata lists) where fewer were read.
+    lost: dict[str, tuple[int, int]] = field(default_factory=dict)
+    #: Why reading stopped early (truncated or corrupt storage), else None.
+    read_error: str | None = None
 
     @property
     def gt_unmatched(self) -> int:
@@ -146,7 +158,9 @@ class ReadStats:
         return {'messages': dict(self.messages), 'frames': self.frames,
                 'colorless_frames': self.colorless, 'dropped': dict(self.dropped),
                 'gt_messages': self.gt_messages, 'gt_matched': self.gt_matched,
-                'gt_unmatched': self.gt_unmatched}
+                'gt_unmatched': self.gt_unmatched,
+                'lost': {t: {'read': r, 'expected': e} for t, (r, e) in self.lost.items()},
+                'read_error': self.read_error}
 
 
 class BagRecord(NamedTuple):
@@ -207,7 +221,9 @@ def bag_name(path: Path) -> str:
     return path.stem
 
 
-def _typestore() -> Any:
+@functools.cache
+def typestore() -> Any:
+    """The Jazzy typestore (built once per process: about 80 ms)."""
     from rosbags.typesys import Stores, get_typestore
 
     return get_typestore(Stores.ROS2_JAZZY)
@@ -300,7 +316,8 @@ class BagReader:
     ...         ...
     """
 
-    def __init__(self, path: str | Path, options: ReaderOptions | None = None) -> None:
+    def __init__(self, path: str | Path, options: ReaderOptions | None = None, *,
+                 warn: Callable[[str], Any] | None = None) -> None:
         self.path = Path(path)
         self.name = bag_name(self.path)
         self.options = options or ReaderOptions()
@@ -309,7 +326,14 @@ class BagReader:
         self.selection: TopicSelection | None = None
         self.topic_types: dict[str, str | None] = {}
         self.topic_counts: dict[str, int] = {}
+        #: Set when the bag's index could not be read and messages are read one by one.
+        self.salvaged = False
         self._gt_read = 0
+        self._read_error: str | None = None
+        self._warn = warn if warn is not None else self._print_warning
+
+    def _print_warning(self, text: str) -> None:
+        print(f'{self.path}: warning: {text}', file=sys.stderr, flush=True)
 
     # -- opening -------------------------------------------------------------------------------
 
@@ -324,21 +348,18 @@ class BagReader:
         """Open the bag, choose topics and check their types (:class:`BagError` if unusable)."""
         from rosbags.highlevel import AnyReader
 
-        if not self.path.exists():
-            raise BagError(self.path, 'no such file or directory')
-        if not is_bag(self.path):
-            raise BagError(self.path, 'not a rosbag2 bag (need a directory with metadata.yaml '
-                                      'or a .mcap / .db3 file)')
+        source = resolve_bag(self.path)
         try:
-            reader = AnyReader([self.path], default_typestore=_typestore())
+            reader = AnyReader([source], default_typestore=typestore())
             reader.open()
         except Exception as err:  # rosbags, sqlite3, mcap, yaml, zstd errors alike
-            raise BagError(self.path, f'cannot open bag: {_why(err)}') from err
+            reader = self._salvage(source, err)
         self._reader = reader
         try:
             self.topic_types = {name: info.msgtype for name, info in reader.topics.items()}
+            # A salvaged bag without metadata.yaml has no counts (None): nothing to compare.
             self.topic_counts = {name: int(info.msgcount) for name, info in
-                                 reader.topics.items()}
+                                 reader.topics.items() if info.msgcount is not None}
             self.selection = select_topics(self.topic_types, self.options, self.path)
             if self.topic_counts.get(self.selection.info, 1) == 0:
                 raise BagError(self.path, f'camera info topic {self.selection.info} has no '
@@ -348,6 +369,22 @@ class BagReader:
         except BaseException:
             self.close()
             raise
+
+    def _salvage(self, source: Path, err: Exception) -> Any:
+        """A message-by-message reader when the index is unreadable (a file cut short)."""
+        from .salvage import SalvageReader
+
+        if self.options.strict:
+            raise BagError(self.path, f'cannot open bag: {_why(err)} (--strict: truncated or '
+                                      f'corrupt bags are refused)') from err
+        try:
+            reader = SalvageReader(source, typestore())
+        except Exception as err2:  # noqa: BLE001 - the original error says more
+            raise BagError(self.path, f'cannot open bag: {_why(err)}') from err2
+        self.salvaged = True
+        self._warn(f'the index of the bag cannot be read ({_why(err)}); reading its messages one '
+                   f'by one up to the last readable one')
+        return reader
 
     def close(self) -> None:
         """Close the underlying reader (idempotent)."""
@@ -379,8 +416,14 @@ class BagReader:
         for rec in self.records():
             yield rec.frame, rec.gt
 
-    def records(self) -> Iterator[BagRecord]:
-        """Yield a :class:`BagRecord` per frame; raises :class:`BagError` on bad data."""
+    def records(self, *, ground_truth: bool = True) -> Iterator[BagRecord]:
+        """Yield a :class:`BagRecord` per frame; raises :class:`BagError` on bad data.
+
+        ``ground_truth=False`` skips the ground-truth topic (one pass less over the file;
+        ``gt`` is then always None). A bag cut short is read up to its last readable message
+        and a warning names what was lost (:attr:`ReadStats.lost`), unless
+        :attr:`ReaderOptions.strict`, which raises :class:`BagError` instead.
+        """
         from endeff_ros.ros import convert
 
         sel = self.selection
@@ -389,7 +432,8 @@ class BagReader:
             sel = self.selection
         assert sel is not None
         self.stats = stats = ReadStats()
-        gt = self._read_gt(sel) if sel.gt else {}
+        self._read_error = None
+        gt = self._read_gt(sel) if sel.gt and ground_truth else {}
         stats.gt_messages = len(gt)
         conns = [c for c in self.reader.connections if c.topic in (sel.color, sel.depth,
                                                                      sel.info)]
@@ -456,13 +500,27 @@ class BagReader:
         if stats.messages[sel.info] == 0:
             raise BagError(self.path, f'no camera info on {sel.info} (no intrinsics)')
         read = dict(stats.messages)
-        if sel.gt:
+        if sel.gt and ground_truth:
             read[sel.gt] = self._gt_read
-        for topic, got in read.items():
-            want = self.topic_counts.get(topic, 0)
-            if got < want:
-                raise BagError(self.path, f'{topic}: the bag lists {want} messages but only '
-                                          f'{got} could be read (truncated or corrupt file)')
+        self._account_losses(read, sel)
+
+    def _account_losses(self, read: dict[str, int], sel: TopicSelection) -> None:
+        """Compare messages read with the bag's counts; warn (or raise when strict)."""
+        stats = self.stats
+        stats.read_error = self._read_error
+        stats.lost = {t: (got, self.topic_counts[t]) for t, got in read.items()
+                      if got < self.topic_counts.get(t, 0)}
+        if not stats.lost and self._read_error is None:
+            return
+        parts = [f'{got} of {want} messages on {t}' for t, (got, want) in stats.lost.items()]
+        if sel.depth not in stats.lost:
+            parts.append(f'{read.get(sel.depth, 0)} depth images on {sel.depth}')
+        detail = f' ({self._read_error})' if self._read_error else ''
+        problem = (f'truncated or corrupt bag{detail}: read {"; ".join(parts)}; '
+                   f'{stats.frames} frames yielded')
+        if self.options.strict:
+            raise BagError(self.path, f'{problem} (--strict)')
+        self._warn(f'{problem}; the rest is lost (--strict refuses such bags)')
 
     def _read_gt(self, sel: TopicSelection) -> dict[int, npt.NDArray[np.float64]]:
         from endeff_ros.ros import convert
@@ -470,7 +528,7 @@ class BagReader:
         out: dict[int, npt.NDArray[np.float64]] = {}
         conns = [c for c in self.reader.connections if c.topic == sel.gt]
         self._gt_read = 0
-        for conn, _, raw in self._messages(conns):
+        for conn, _, raw in self.raw_messages(conns):
             self._gt_read += 1
             msg = self._deserialize(raw, conn)
             try:
@@ -488,8 +546,12 @@ class BagReader:
             out[convert.stamp_to_ns(msg.header.stamp)] = pos[np.all(np.isfinite(pos), axis=1)]
         return out
 
-    def _messages(self, conns: list[Any]) -> Iterator[tuple[Any, int, bytes]]:
-        """Raw messages of ``conns``; storage-level failures become :class:`BagError`."""
+    def raw_messages(self, conns: list[Any]) -> Iterator[tuple[Any, int, bytes]]:
+        """Raw ``(connection, log time, data)`` of ``conns`` in the storage's order.
+
+        A storage-level failure (truncated or corrupt file) ends the iteration; it is kept for
+        the warning of :meth:`records` or, with ``strict``, raised as :class:`BagError`.
+        """
         if not conns:
             return
         it = self.reader.messages(connections=conns)
@@ -499,8 +561,11 @@ class BagReader:
             except StopIteration:
                 return
             except Exception as err:
-                raise BagError(self.path, f'cannot read messages (truncated or corrupt '
-                                          f'file?): {_why(err)}') from err
+                if self.options.strict:
+                    raise BagError(self.path, f'cannot read messages (truncated or corrupt '
+                                              f'file, --strict): {_why(err)}') from err
+                self._read_error = self._read_error or _why(err)
+                return
             yield item
 
     def _deserialize(self, raw: bytes, conn: Any) -> Any:
@@ -522,7 +587,7 @@ class BagReader:
         heap: list[tuple[int, int, int, _Entry]] = []
         newest = None
         counter = itertools.count()
-        for conn, log_time, raw in self._messages(conns):
+        for conn, log_time, raw in self.raw_messages(conns):
             msg = self._deserialize(raw, conn)
             stamp = convert.stamp_to_ns(msg.header.stamp)
             entry = _Entry(conn.topic, stamp, log_time, msg)
@@ -540,6 +605,25 @@ class _Entry:
     stamp: int
     log_time: int
     msg: Any
+
+
+def resolve_bag(path: Path) -> Path:
+    """The path rosbags opens for ``path``: a bag directory, a storage file, or the only
+    storage file of a directory without ``metadata.yaml`` (as :func:`find_bags` reads it)."""
+    if not path.exists():
+        raise BagError(path, 'no such file or directory')
+    if is_bag(path):
+        return path
+    if path.is_dir():
+        files = sorted(p for p in path.iterdir() if p.suffix in BAG_SUFFIXES and p.is_file())
+        if len(files) == 1:
+            return files[0]
+        if files:
+            raise BagError(path, f'directory without metadata.yaml holds {len(files)} storage '
+                                 f'files ({", ".join(f.name for f in files)}): pass them one '
+                                 f'by one or restore metadata.yaml (ros2 bag reindex)')
+    raise BagError(path, 'not a rosbag2 bag (need a directory with metadata.yaml or a .mcap / '
+                         '.db3 file)')
 
 
 def _why(err: BaseException) -> str:
