@@ -1,0 +1,162 @@
+"""Real, hand-labelled Kinect v1 depth frames of people as benchmark bags.
+
+Two public sources, committed under ``data/`` beside their licence notices:
+
+- ``skeltrack``: the 12 depth frames of Skeltrack's tests (one person facing the camera at
+  about 1.2 m, upper body; two frames show a second person behind), LGPL-3.0;
+- ``five_people``: PCL's ``test/five_people.pcd``, an organised cloud with colour of five
+  people walking away from the camera (1.8-3.5 m), BSD-3-Clause.
+
+:func:`build_bags` writes one bag per source in the benchmark-bag form (colour ``rgb8``, a grey
+rendering of the depth for Skeltrack; depth ``16UC1`` millimetres, exactly the source's
+values; camera info; the hand labels of ``data/<source>/labels.yaml`` as ground truth at the
+depth stamps) and records the source's attributes in the bag metadata
+(:data:`endeff_ros.attributes.ATTRIBUTES_KEY`). Bags are generated, never committed::
+
+    python -m endeff_ros.realdata build data/real
+    endeff eval data/real
+
+See ``docs/real-frames.md`` for the sources, the labelling method and the scores.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from endeff_ros.attributes import ATTRIBUTES_KEY
+from endeff_ros.realdata.labels import Label, LabelError, gt_arrays, make_label, read_labels
+from endeff_ros.realdata.sources import RealFrame, read_five_people, read_skeltrack
+
+DATA_DIR = Path(__file__).resolve().parent / 'data'
+FRAME_ID = 'camera_depth_optical_frame'
+START_NS = 1_700_000_000_000_000_000
+PERIOD_NS = 33_333_333
+COLOR_OFFSET_NS = 2_000_000  # colour stamped a little after depth, as on real drivers
+
+
+@dataclass(frozen=True)
+class Source:
+    """One data source: its folder under ``data/``, its frame files and reader, attributes."""
+
+    name: str
+    pattern: str
+    read: Callable[[Path], RealFrame]
+    attributes: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def folder(self) -> Path:
+        """``data/<name>``."""
+        return DATA_DIR / self.name
+
+    @property
+    def labels_path(self) -> Path:
+        """The hand labels of this source."""
+        return self.folder / 'labels.yaml'
+
+    def files(self) -> list[Path]:
+        """Frame files, ordered by the number in their name (Skeltrack's capture counter)."""
+        def key(p: Path) -> tuple[int, str]:
+            digits = ''.join(c for c in p.name if c.isdigit())
+            return (int(digits) if digits else 0, p.name)
+
+        return sorted(self.folder.glob(self.pattern), key=key)
+
+    def frames(self) -> list[RealFrame]:
+        """All frames of the source."""
+        return [self.read(p) for p in self.files()]
+
+
+SOURCES: dict[str, Source] = {
+    'skeltrack': Source('skeltrack', 'depth-data-*.gz', read_skeltrack, {
+        'source': 'skeltrack', 'sensor': 'kinect_v1', 'view': 'front', 'people': 1,
+        'room': 'background removed', 'real': True}),
+    'five_people': Source('five_people', '*.pcd', lambda p: read_five_people(p)[0], {
+        'source': 'pcl_five_people', 'sensor': 'kinect_v1', 'view': 'back', 'people': 5,
+        'room': 'corridor', 'real': True}),
+}
+
+
+def source_labels(source: Source, frames: list[RealFrame] | None = None
+                  ) -> dict[str, list[Label]]:
+    """The source's labels lifted with its frames' depth (``{frame name: labels}``)."""
+    frames = frames if frames is not None else source.frames()
+    picks = read_labels(source.labels_path)
+    by_name = {f.name: f for f in frames}
+    out: dict[str, list[Label]] = {}
+    for name, labs in picks.items():
+        if name not in by_name:
+            msg = f'{source.labels_path}: frame {name!r} is not a frame of {source.name}'
+            raise LabelError(msg)
+        frame = by_name[name]
+        out[name] = [make_label(name, frame.depth_mm, frame.intrinsics, p) for p in labs]
+    return out
+
+
+def build_bag(source: Source, out: Path, *, storage: str = 'mcap', repeat: int = 1) -> int:
+    """Write ``source`` as one bag at ``out`` (replaced if it exists); returns frames written.
+
+    Each frame is written ``repeat`` times in a row (consecutive stamps, the same labels), so
+    that the temporal estimator can be scored on a still scene; with ``repeat`` 1 the frames
+    follow each other although they were not recorded consecutively.
+    """
+    from rosbags.rosbag2 import Writer
+
+    from endeff_ros.synth.frames import SynthFrame
+    from endeff_ros.synth.sequences import SequenceSpec
+    from endeff_ros.synth.writer import STORAGES, frame_messages, typestore
+
+    if repeat < 1:
+        msg = f'repeat must be >= 1, got {repeat}'
+        raise ValueError(msg)
+    frames = source.frames()
+    labels = source_labels(source, frames)
+    spec = SequenceSpec(source.name, frames=len(frames) * repeat)
+    out = Path(out)
+    if out.exists():
+        shutil.rmtree(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    writer = Writer(out, version=9, storage_plugin=STORAGES[storage])
+    attributes = dict(source.attributes, **({'repeat': repeat} if repeat > 1 else {}))
+    writer.set_custom_data(ATTRIBUTES_KEY, json.dumps(attributes))
+    rng = np.random.default_rng(0)
+    count = 0
+    with writer:
+        conns: dict[str, Any] = {}
+        for frame in frames:
+            depth = np.where(frame.depth_mm > 0, frame.depth_mm.astype(np.float32) /
+                             np.float32(1000.0), np.float32(np.nan)).astype(np.float32)
+            gt, ids = gt_arrays(labels.get(frame.name, []))
+            for _ in range(repeat):
+                stamp = START_NS + count * PERIOD_NS
+                synth = SynthFrame(index=count, stamp_ns=stamp,
+                                   color_stamp_ns=stamp + COLOR_OFFSET_NS, color=frame.rgb,
+                                   depth=depth, intrinsics=frame.intrinsics, gt=gt, gt_ids=ids,
+                                   gt_visible=np.ones(len(ids), bool), frame_id=FRAME_ID)
+                for log, topic, typ, data in frame_messages(synth, spec, rng):
+                    if topic not in conns:
+                        conns[topic] = writer.add_connection(topic, typ,
+                                                             typestore=typestore())
+                    writer.write(conns[topic], log, data)
+                count += 1
+    return count
+
+
+def build_bags(out_dir: str | Path, *, names: list[str] | None = None, storage: str = 'mcap',
+               repeat: int = 1) -> list[Path]:
+    """One bag per source (``names``, default all) under ``out_dir``; returns their paths."""
+    written = []
+    for name in names or list(SOURCES):
+        if name not in SOURCES:
+            msg = f'unknown source {name!r} (have {", ".join(SOURCES)})'
+            raise ValueError(msg)
+        path = Path(out_dir) / name
+        build_bag(SOURCES[name], path, storage=storage, repeat=repeat)
+        written.append(path)
+    return written
