@@ -417,9 +417,8 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt as err:
         for o in outs:
             sweep_stale_partials(o, include_own=True)
-        done = [o for o in outs if o.exists()]
-        print(f'endeff process: interrupted; unfinished outputs removed '
-              f'({len(done)} of {len(outs)} complete)', file=sys.stderr)
+        print('endeff process: interrupted; outputs not finished were removed (finished ones '
+              'are complete bags)', file=sys.stderr)
         return 143 if isinstance(err, _Interrupted) else 130
     finally:
         signal.signal(signal.SIGTERM, previous)
