@@ -10,9 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import sys
-from typing import Any
 
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'synth': ('endeff_ros.synth.cli', 'Generate synthetic RGB-D benchmark bags.'),
@@ -21,33 +19,6 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'process': ('endeff_ros.bag.process', 'Run the tracker on rosbag2 bags, write results.'),
     'params': ('endeff_ros.core.params_cli', 'Print the parameter table or config YAML.'),
 }
-
-
-def print_json(data: Any, path: str | None = None) -> None:
-    """Print ``data`` as indented JSON; also write it to ``path`` when given."""
-    text = json.dumps(data, indent=2, default=float)
-    print(text)
-    if path:
-        with open(path, 'w', encoding='utf-8') as fh:
-            fh.write(text + '\n')
-
-
-def load_params_option(path: str | None, prog: str) -> Any:
-    """The ``--params YAML`` option of a command: the parameter set, or None for defaults.
-
-    A file that cannot be read or holds bad parameters ends the command with status 2 and a
-    message naming the file.
-    """
-    if not path:
-        return None
-    from endeff_ros.core.errors import EndeffError
-    from endeff_ros.core.params import load_yaml
-
-    try:
-        return load_yaml(path)
-    except (OSError, EndeffError) as err:
-        print(f'{prog}: cannot load parameters {path}: {err}', file=sys.stderr)
-        raise SystemExit(2) from err
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -46,7 +46,7 @@ from endeff_ros.bag.reader import (
     find_bags,
     options_from_args,
 )
-from endeff_ros.cli import load_params_option
+from endeff_ros.cli_common import load_params_option
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.types import Track
 from endeff_ros.scoring import (

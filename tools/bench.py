@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from endeff_ros.cli import load_params_option, print_json
+from endeff_ros.cli_common import load_params_option, print_json
 
 
 def _pin_one_core() -> int | None:

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from endeff_ros.cli import print_json
+from endeff_ros.cli_common import print_json
 
 if TYPE_CHECKING:
     from collections.abc import Iterator

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from endeff_ros.cli import print_json
+from endeff_ros.cli_common import print_json
 from tools.procs import ros_env, start, stop
 
 TOPIC = '/endeff_dds_bench/image'

@@ -25,7 +25,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from endeff_ros.cli import load_params_option, print_json
+from endeff_ros.cli_common import load_params_option, print_json
 
 DEFAULT_SEQUENCE = 'jumping_jacks'
 
