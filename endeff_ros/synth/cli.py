@@ -3,11 +3,17 @@
 Writes ``OUT/mcap/<sequence>/`` and/or ``OUT/sqlite3/<sequence>/`` (rosbag2, ROS 2 Jazzy
 messages, form of ``shared/spec/benchmark-bags.md``). Sequences are generated in parallel
 worker processes (one per core, at most one per sequence).
+
+Two suites: ``paper`` (default; the procedural sequences, unchanged) and ``mocap`` (motion
+capture clips with attributes, ``synth/suite.py``; ``--only`` takes glob patterns of bag names
+there, ``--list`` prints the specs without rendering).
 """
 
 from __future__ import annotations
 
 import argparse
+import fnmatch
+import json
 import os
 import sys
 import time
@@ -19,15 +25,24 @@ from .sequences import GROUPS, SEQUENCES, SPECS
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument('--out', required=True, type=Path, help='output directory')
+    parser.add_argument('--suite', choices=('paper', 'mocap'), default='paper',
+                        help='paper: the procedural sequences (default); mocap: motion-capture '
+                             'clips with attributes')
+    parser.add_argument('--out', type=Path, help='output directory (required unless --list)')
     parser.add_argument('--quick', action='store_true',
                         help='few frames per sequence (for tests), same motions')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
-    parser.add_argument('--storage', choices=('mcap', 'sqlite3', 'both'), default='both',
-                        help='rosbag2 storage plugin(s) to write (default both)')
+    parser.add_argument('--storage', choices=('mcap', 'sqlite3', 'both'), default=None,
+                        help='rosbag2 storage plugin(s) to write (default: both for paper, '
+                             'mcap for mocap)')
     parser.add_argument('--only', default='',
-                        help='comma-separated sequence names or groups '
-                             f'({", ".join(GROUPS)}); default all')
+                        help='paper: comma-separated sequence names or groups '
+                             f'({", ".join(GROUPS)}); mocap: comma-separated glob patterns of '
+                             "bag names (e.g. 'dev__*'); default all")
+    parser.add_argument('--clip-cache', type=Path, default=None,
+                        help="mocap: folder of fetched clips (default: the catalogue's own)")
+    parser.add_argument('--list', action='store_true',
+                        help='mocap: print the bag names and attributes, render nothing')
     parser.add_argument('--jobs', type=int, default=0,
                         help='worker processes (default: number of CPUs)')
 
@@ -73,13 +88,89 @@ def generate(out: Path, names: list[str], storages: list[str], *, quick: bool = 
         return {n: futs[n].result() for n in names}
 
 
+def load_suite_clips(quick: bool, cache: Path | None) -> list:
+    """The clips of the mocap suite: committed ones only for ``quick``, else the catalogue
+    with whatever has been fetched into ``cache``."""
+    try:
+        from .mocap.catalogue import load_clips
+    except ImportError as exc:
+        msg = f'the clip catalogue (endeff_ros.synth.mocap.catalogue) is not available: {exc}'
+        raise ValueError(msg) from exc
+    return list(load_clips(cache_dir=cache, committed_only=quick))
+
+
+def select_specs(specs: list, only: str) -> list:
+    """The specs whose bag name matches one of the comma-separated glob patterns (all if
+    empty); a pattern that matches nothing is an error."""
+    pats = [t.strip() for t in only.split(',') if t.strip()]
+    if not pats:
+        return specs
+    for pat in pats:
+        if not any(fnmatch.fnmatchcase(s.name, pat) for s in specs):
+            msg = f'--only pattern {pat!r} matches no bag of the mocap suite'
+            raise ValueError(msg)
+    return [s for s in specs if any(fnmatch.fnmatchcase(s.name, p) for p in pats)]
+
+
+def _mocap_one(spec, clips: dict, out: Path, storages: list[str]) -> dict:
+    from .suite import write_bag
+
+    return write_bag(spec, clips, out, storages)
+
+
+def run_mocap(args: argparse.Namespace, storages: list[str]) -> int:
+    """``endeff synth --suite mocap``: render the suite's bags (longest first, in parallel)."""
+    from .suite import suite_specs
+
+    try:
+        clips = load_suite_clips(args.quick, args.clip_cache)
+        specs = select_specs(suite_specs(clips, quick=args.quick, seed=args.seed), args.only)
+    except ValueError as exc:
+        print(f'endeff synth: {exc}', file=sys.stderr)
+        return 2
+    if args.list:
+        for s in specs:
+            print(s.name, json.dumps(s.attributes, sort_keys=True))
+        print(f'{len(specs)} bags, {sum(s.frames for s in specs)} frames')
+        return 0
+    byname = {c.name: c for c in clips}
+    t0 = time.monotonic()
+    jobs = max(1, min(args.jobs or os.cpu_count() or 1, len(specs)))
+    results: dict[str, dict] = {}
+    if jobs == 1:
+        for s in specs:
+            results[s.name] = _mocap_one(s, byname, args.out, storages)
+    else:
+        order = sorted(specs, key=lambda s: -s.frames * len(s.people))
+        with ProcessPoolExecutor(jobs, mp_context=get_context('spawn')) as pool:
+            futs = {}
+            for s in order:
+                need = {p.clip: byname[p.clip] for p in s.people}
+                futs[s.name] = pool.submit(_mocap_one, s, need, args.out, storages)
+            results = {s.name: futs[s.name].result() for s in specs}
+    dt = time.monotonic() - t0
+    total = sum(r['frames'] for r in results.values())
+    for name, r in results.items():
+        print(f"{name}: {r['frames']} frames, truncated={r['truncated']}")
+    print(f'wrote {len(results)} mocap bags ({total} frames) x {len(storages)} storage(s) to '
+          f'{args.out} in {dt:.1f} s')
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    suite = getattr(args, 'suite', 'paper')
+    if args.out is None and not (suite == 'mocap' and getattr(args, 'list', False)):
+        print('endeff synth: --out is required', file=sys.stderr)
+        return 2
+    storage = args.storage or ('mcap' if suite == 'mocap' else 'both')
+    storages = ['mcap', 'sqlite3'] if storage == 'both' else [storage]
+    if suite == 'mocap':
+        return run_mocap(args, storages)
     try:
         names = select(args.only)
     except ValueError as exc:
         print(f'endeff synth: {exc}', file=sys.stderr)
         return 2
-    storages = ['mcap', 'sqlite3'] if args.storage == 'both' else [args.storage]
     t0 = time.monotonic()
     counts = generate(args.out, names, storages, quick=args.quick, seed=args.seed,
                       jobs=args.jobs)

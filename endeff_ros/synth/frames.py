@@ -74,11 +74,11 @@ def _frame(name: str, index: int, u: float, seed: int, cam: Camera, stamp: int,
     return SynthFrame(index, stamp, cstamp, None if drop_c else color,
                       None if drop_d else depth.astype(np.float32), cam.intrinsics,
                       ren.gt.copy(), ent.gt_ids.astype(np.uint32),
-                      _sensed(ren, ent.gt_prims, depth), cam.frame_id)
+                      sensed_visibility(ren, ent.gt_prims, depth), cam.frame_id)
 
 
-def _sensed(ren, gt_prims: npt.NDArray[np.int64], depth: npt.NDArray[np.float32]
-            ) -> npt.NDArray[np.bool_]:
+def sensed_visibility(ren, gt_prims: npt.NDArray[np.int64],
+                      depth: npt.NDArray[np.float32]) -> npt.NDArray[np.bool_]:
     """Visibility (M,): the end-effector's own part is in view at its projection (1 px
     tolerance) and has at least one depth reading within 2 px of it."""
     vis = ren.gt_visible.copy()

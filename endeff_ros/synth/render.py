@@ -17,27 +17,34 @@ from ..core.types import KINECT_640, Intrinsics
 from .body import Entity
 from .shapes import Primitive, Vec
 
-FLOOR, WALL, NOTHING = -2, -3, -1
+FLOOR, WALL, NOTHING, STATIC = -2, -3, -1, -4
 HAIR = np.array([0.25, 0.16, 0.08])
 
 
 @dataclass(frozen=True)
 class Camera:
     """The virtual RGB-D camera: ``height`` (m) above the floor at the scene-frame origin,
-    looking along -z of the scene frame, pitched down by ``pitch`` (rad)."""
+    looking along -z of the scene frame, pitched down by ``pitch`` (rad, any value in
+    (-pi/2, pi/2)) and then rolled by ``roll`` (rad, about the optical axis; positive turns
+    the image content clockwise). The back wall is the plane z = ``wall_z`` of the scene."""
 
     intrinsics: Intrinsics
     height: float = 1.15
     pitch: float = np.deg2rad(5.0)
     frame_id: str = 'camera_color_optical_frame'
     wall_z: float = -5.5
+    roll: float = 0.0
 
     @property
     def rotation(self) -> Vec:
         """Rotation (3, 3) from scene-frame directions to optical-frame directions."""
         c, s = np.cos(self.pitch), np.sin(self.pitch)
         pitch = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-        return pitch @ np.diag([1.0, -1.0, -1.0])
+        rot = pitch @ np.diag([1.0, -1.0, -1.0])
+        if self.roll:
+            cr, sr = np.cos(self.roll), np.sin(self.roll)
+            rot = np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]]) @ rot
+        return rot
 
     @property
     def position(self) -> Vec:
@@ -53,7 +60,7 @@ def default_camera() -> Camera:
     return Camera(KINECT_640)
 
 
-@lru_cache(maxsize=4)
+@lru_cache(maxsize=8)
 def rays(intr: Intrinsics) -> Vec:
     """Per-pixel ray directions (H, W, 3) with z = 1, float64."""
     u = (np.arange(intr.width) - intr.cx) / intr.fx
@@ -297,11 +304,28 @@ def _shading(nrm: npt.ArrayLike, view: npt.ArrayLike, light: Vec) -> Vec:
     return 0.28 + 0.5 * lam + 0.3 * head
 
 
-def render(entity: Entity, cam: Camera) -> Rendered:
-    """Ray-cast ``entity`` (scene frame) plus floor and wall into an ideal RGB-D view."""
+def static_layer(static: Entity, cam: Camera) -> Background:
+    """Floor, wall and the static entity ``static`` (furniture) rendered once, for ``render``'s
+    ``bg`` argument: a scene whose furniture does not move pays for it once, not per frame.
+    Furniture pixels are owned by ``STATIC`` (no primitive index, hence never ground truth)."""
+    ren = render(static, cam)
+    owner = np.where(ren.owner >= 0, np.int16(STATIC), ren.owner).astype(np.int16)
+    bg = background(cam)
+    out = Background(ren.z, owner, ren.normal, ren.color, bg.view, bg.light)
+    for a in (out.z, out.owner, out.normal, out.color):
+        a.flags.writeable = False
+    return out
+
+
+def render(entity: Entity, cam: Camera, bg: Background | None = None) -> Rendered:
+    """Ray-cast ``entity`` (scene frame) plus floor and wall into an ideal RGB-D view.
+
+    ``bg``: the static part of the view (default ``background(cam)``; ``static_layer`` adds
+    furniture).
+    """
     intr = cam.intrinsics
     d_all = rays(intr)
-    bg = background(cam)
+    bg = background(cam) if bg is None else bg
     rc = cam.rotation
     trans = -rc @ cam.position
     prims = [p.transformed(rc, trans) for p in entity.prims]

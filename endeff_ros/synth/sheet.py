@@ -4,6 +4,10 @@ One row per bag: for a few evenly spaced depth frames, the depth image (colour-m
 5.7 m, black = no reading) and the nearest colour image, both with the ground-truth
 end-effectors of that frame drawn (circle + id). Works on any bag in the benchmark form, not
 only the synthetic ones; directories are searched for bags (one copy per bag name, mcap first).
+
+``--tiles`` draws one small tile per bag instead (the middle frame's colour image with the
+ground truth and a depth inset), captioned with the bag's name and the attributes it records
+in its metadata: a whole suite on one page.
 """
 
 from __future__ import annotations
@@ -32,6 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--frames', type=int, default=4, help='frames per bag (default 4)')
     parser.add_argument('--scale', type=float, default=0.4,
                         help='tile size relative to the image (default 0.4)')
+    parser.add_argument('--tiles', action='store_true',
+                        help='one captioned tile per bag (middle frame) instead of rows')
+    parser.add_argument('--cols', type=int, default=6, help='tiles per row (default 6)')
 
 
 def find_bags(paths: list[Path]) -> list[Path]:
@@ -178,6 +185,67 @@ def contact_sheet(bags: list[Path], n_frames: int = 4, scale: float = 0.4
     return np.concatenate(rows, 0)
 
 
+TILE_W = 300  # px
+
+
+def bag_attributes(bag: Path) -> dict:
+    """The attributes a bag records in its rosbag2 metadata (``{}`` if none or unreadable)."""
+    from rosbags.highlevel import AnyReader
+
+    from ..attributes import custom_data, parse_attributes
+
+    with AnyReader([bag]) as reader:
+        attrs, _ = parse_attributes(custom_data(reader), bag.name)
+    return attrs
+
+
+def attribute_line(attrs: dict) -> str:
+    """A short caption of the main attributes, e.g. ``side 2.4m cam1.2m d435 wall p1 cut``."""
+    if not attrs:
+        return ''
+    parts = [str(attrs.get('view', '')), f"{attrs.get('distance_m', 0):.1f}m",
+             f"cam{attrs.get('camera_height_m', 0):.1f}m", str(attrs.get('sensor', '')),
+             str(attrs.get('room', '')), f"p{attrs.get('people', '')}"]
+    if attrs.get('interaction', 'none') != 'none':
+        parts.append(str(attrs['interaction']))
+    if attrs.get('truncated'):
+        parts.append('cut')
+    return ' '.join(p for p in parts if p)
+
+
+def tile_sheet(bags: list[Path], cols: int = 6) -> npt.NDArray[np.uint8]:
+    """One tile per bag (middle frame: colour with ground truth, depth inset in the corner,
+    name and attribute line below), ``cols`` per row; BGR (H, W, 3) uint8."""
+    tiles = []
+    for bag in bags:
+        samples = read_samples(bag, 3)
+        if not samples:
+            continue
+        s = samples[len(samples) // 2]
+        h, w = s['depth'].shape
+        scale = TILE_W / w
+        th = int(round(h * scale))
+        img = (cv2.resize(s['color'], (TILE_W, th), interpolation=cv2.INTER_AREA)
+               if s['color'] is not None else np.zeros((th, TILE_W, 3), np.uint8))
+        _draw_gt(img, s['k'], s['gt'], scale)
+        inset = cv2.resize(_depth_vis(s['depth']), (TILE_W // 3, th // 3),
+                           interpolation=cv2.INTER_NEAREST)
+        img[:inset.shape[0], -inset.shape[1]:] = inset
+        cap = np.full((30, TILE_W, 3), 40, np.uint8)
+        for row, text in enumerate((bag.name[:52], attribute_line(bag_attributes(bag)))):
+            cv2.putText(cap, text, (3, 12 + 14 * row), cv2.FONT_HERSHEY_SIMPLEX, 0.33,
+                        (255, 255, 255), 1, cv2.LINE_AA)
+        tiles.append(np.concatenate([img, cap], 0))
+    if not tiles:
+        msg = 'no bags with a depth topic found'
+        raise ValueError(msg)
+    th = max(t.shape[0] for t in tiles)
+    tiles = [np.pad(t, ((0, th - t.shape[0] + 2), (0, 2), (0, 0))) for t in tiles]
+    tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % cols)
+    rows = [np.concatenate(tiles[k:k + cols], 1) for k in range(0, len(tiles), cols)]
+    return np.concatenate(rows, 0)
+
+
 def run(args: argparse.Namespace) -> int:
     bags = find_bags(args.bags)
     if not bags:
@@ -185,7 +253,10 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     try:
-        sheet = contact_sheet(bags, args.frames, args.scale)
+        if getattr(args, 'tiles', False):
+            sheet = tile_sheet(bags, max(1, getattr(args, 'cols', 6)))
+        else:
+            sheet = contact_sheet(bags, args.frames, args.scale)
     except ValueError as exc:
         print(f'endeff sheet: {exc}', file=sys.stderr)
         return 2

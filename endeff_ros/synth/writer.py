@@ -7,7 +7,7 @@ stamps plus a small random delay.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import numpy as np
@@ -111,10 +111,13 @@ def frame_messages(frame: SynthFrame, spec: SequenceSpec, rng: np.random.Generat
 
 
 def write_bags(frames: Iterable[SynthFrame], spec: SequenceSpec, paths: dict[str, Path],
-               seed: int = 0) -> int:
+               seed: int = 0,
+               custom_data: Callable[[], dict[str, str]] | None = None) -> int:
     """Write ``frames`` to one bag per storage (``paths``: storage name -> bag directory).
 
-    Existing bag directories are replaced. Returns the number of frames written.
+    ``custom_data`` is called once all frames are written (so it may describe them) and its
+    string pairs go into the rosbag2 metadata's ``custom_data``. Existing bag directories are
+    replaced. Returns the number of frames written.
     """
     import shutil
 
@@ -143,6 +146,10 @@ def write_bags(frames: Iterable[SynthFrame], spec: SequenceSpec, paths: dict[str
                 for w, c in zip(writers, conns):
                     w.write(c[topic], log, data)
             count += 1
+        if custom_data is not None:
+            for key, value in custom_data().items():
+                for w in writers:
+                    w.set_custom_data(key, value)
     finally:
         for w in writers:
             w.close()

@@ -1,0 +1,191 @@
+"""Depth sensor models for the ``mocap`` suite: structured light, time of flight, active stereo.
+
+Every model turns an ideal render (``render.Rendered``) into the depth image a driver would
+publish registered to the colour image (same size and intrinsics, as the drivers' aligned
+topics), NaN = no reading. All operations are whole-image numpy/OpenCV; the only Python loops
+run over a few kernel offsets or disparity shifts, never over pixels.
+
+- Structured light (Kinect v1, Xtion): ``sensor.depth_image``, the paper suite's model.
+- Time of flight (Azure Kinect NFOV, Kinect v2): a pixel at a depth edge integrates light from
+  both surfaces, so its phase gives a depth between them (flying pixels, on both sides of the
+  edge, 1-2 px wide); indirect light adds path length in concave regions (multipath: pixels
+  farther than their surroundings read farther still); the return amplitude falls with
+  albedo, incidence and 1/z^2, so dark surfaces (hair, dark shoes) drop out and the noise
+  grows as the amplitude falls (sigma = sigma0 * (z / 1 m) / sqrt(amplitude)).
+- Active stereo (RealSense D435, D455): depth from disparity d = f B / z with sub-pixel
+  disparity noise (sigma_z = z^2 sigma_d / (f B), hence growing with z^2), spatially
+  correlated "speckle" disparity noise, no reading where the second imager cannot see the
+  surface (left of a near edge, width f B (1/z_far - 1/z_near) px), foreground fattening of
+  block matching at edges, small invalid blobs, and a minimum distance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from ..core.types import KINECT_640, Intrinsics
+from . import sensor as structured_light
+from .render import Rendered, background
+
+KINDS = ('structured_light', 'tof', 'stereo')
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """One camera model: registered depth intrinsics and the depth noise parameters.
+
+    ``z_min``/``z_max`` (m) bound the readings; ``baseline_m`` and ``disparity_sigma_px`` are
+    for stereo (the depth imager's focal length in the colour image's pixels is used, since
+    depth is registered to colour); ``tof_sigma_m`` is the ToF noise at 1 m and full amplitude.
+    ``color_encoding`` is what the vendor's ROS driver publishes on its colour topic.
+    """
+
+    name: str
+    kind: str
+    intrinsics: Intrinsics
+    z_min: float
+    z_max: float
+    color_encoding: str = 'rgb8'
+    baseline_m: float = 0.0
+    disparity_sigma_px: float = 0.0
+    tof_sigma_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            msg = f'sensor kind must be one of {KINDS}, got {self.kind!r}'
+            raise ValueError(msg)
+
+
+SENSORS: dict[str, SensorModel] = {m.name: m for m in (
+    SensorModel('kinect_v1', 'structured_light', KINECT_640, 0.4, 8.0),
+    SensorModel('xtion', 'structured_light', Intrinsics(570.3, 570.3, 319.5, 239.5, 640, 480),
+                0.4, 8.0, color_encoding='bgr8'),
+    SensorModel('azure_nfov', 'tof', Intrinsics(504.0, 504.0, 319.5, 287.5, 640, 576), 0.5,
+                3.86, color_encoding='bgr8', tof_sigma_m=0.0012),
+    SensorModel('kinect_v2', 'tof', Intrinsics(365.5, 365.5, 255.5, 211.5, 512, 424), 0.5,
+                4.5, color_encoding='bgr8', tof_sigma_m=0.0015),
+    SensorModel('d435', 'stereo', Intrinsics(606.0, 606.0, 423.5, 239.5, 848, 480), 0.3, 8.0,
+                baseline_m=0.050, disparity_sigma_px=0.08),
+    SensorModel('d455', 'stereo', Intrinsics(640.0, 640.0, 639.5, 359.5, 1280, 720), 0.4,
+                8.0, baseline_m=0.095, disparity_sigma_px=0.08),
+)}
+
+
+def sensor_depth(ren: Rendered, model: SensorModel,
+                 rng: np.random.Generator) -> npt.NDArray[np.float32]:
+    """Noisy registered depth (H, W) float32 m, NaN = no reading, of ``ren`` seen by ``model``."""
+    if (ren.z.shape[1], ren.z.shape[0]) != (model.intrinsics.width, model.intrinsics.height):
+        msg = (f'render is {ren.z.shape[1]}x{ren.z.shape[0]} but sensor {model.name!r} is '
+               f'{model.intrinsics.width}x{model.intrinsics.height}')
+        raise ValueError(msg)
+    if model.kind == 'structured_light':
+        out = structured_light.depth_image(ren, rng)
+        out[(out < model.z_min) | (out > model.z_max)] = np.nan
+        return out
+    if model.kind == 'tof':
+        return tof_depth(ren, model, rng)
+    return stereo_depth(ren, model, rng)
+
+
+def _edges(z: npt.NDArray[np.float32], rel: float = 0.04, floor: float = 0.08
+           ) -> tuple[npt.NDArray, npt.NDArray, npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
+    """3x3 neighbourhood (min, max) of ``z`` and the masks of pixels with a much nearer
+    neighbour (far side of a depth edge) and a much farther one (near side)."""
+    kernel = np.ones((3, 3), np.uint8)
+    zmin, zmax = cv2.erode(z, kernel), cv2.dilate(z, kernel)
+    thr = np.maximum(np.float32(floor), np.float32(rel) * zmin)
+    return zmin, zmax, (z - zmin) > thr, (zmax - z) > thr
+
+
+def _cos_incidence(ren: Rendered) -> npt.NDArray[np.float32]:
+    view = background(ren.camera).view
+    return np.abs((ren.normal * view).sum(2)).astype(np.float32)
+
+
+def tof_depth(ren: Rendered, model: SensorModel,
+              rng: np.random.Generator) -> npt.NDArray[np.float32]:
+    """Time-of-flight depth (see the module docstring)."""
+    finite = np.isfinite(ren.z)
+    z = np.where(finite, ren.z, 50.0).astype(np.float32)
+    h, w = z.shape
+    # Multipath: concave neighbourhoods (the pixel is farther than its 15x15 surroundings, e.g.
+    # the floor next to a foot, a wall corner) read up to 3 cm farther.
+    blur = cv2.blur(np.minimum(z, np.float32(model.z_max + 1.0)), (15, 15))
+    out = z + np.clip(np.float32(0.35) * (z - blur), 0.0, 0.03).astype(np.float32)
+    # Flying pixels: edge pixels on both sides mix the near and far returns; a second ring
+    # outside the first on the far side mixes with a lower weight.
+    zmin, zmax, far, near = _edges(z)
+    ev, eu = np.nonzero(far | near)
+    fly = rng.random(len(ev)) < 0.75
+    mix = rng.uniform(0.1, 0.9, int(fly.sum())).astype(np.float32)
+    out[ev[fly], eu[fly]] = zmin[ev[fly], eu[fly]] + mix * (zmax - zmin)[ev[fly], eu[fly]]
+    ring = cv2.dilate(far.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~(far | near)
+    zmin5 = cv2.erode(z, np.ones((5, 5), np.uint8))
+    rv, ru = np.nonzero(ring & ((z - zmin5) > np.maximum(0.08, 0.04 * zmin5)))
+    pick = rng.random(len(rv)) < 0.3
+    rv, ru = rv[pick], ru[pick]
+    out[rv, ru] = z[rv, ru] - rng.uniform(0.05, 0.35, len(rv)).astype(np.float32) * (
+        z[rv, ru] - zmin5[rv, ru])
+    # Amplitude: albedo (luminance of the shaded colour) x incidence / z^2.
+    lum = ren.color @ np.array([0.3, 0.55, 0.15], np.float32)
+    cos_inc = _cos_incidence(ren)
+    amp = lum * np.maximum(cos_inc, 0.05) / np.maximum(z, 0.3) ** 2 * np.float32(4.0)
+    sigma = np.float32(model.tof_sigma_m) * z / np.sqrt(np.maximum(amp, 0.02))
+    out += structured_light._noise((h, w), rng) * sigma
+    p_drop = np.clip((0.06 - amp) / 0.05, 0.0, 1.0)  # weak returns: dark, far or grazing
+    missing = ~finite | (rng.random((h, w), dtype=np.float32) < p_drop)
+    missing |= cos_inc < np.float32(np.cos(np.deg2rad(85.0)))
+    missing |= (out < model.z_min) | (out > model.z_max)
+    out[missing] = np.nan
+    return out
+
+
+def stereo_depth(ren: Rendered, model: SensorModel,
+                 rng: np.random.Generator) -> npt.NDArray[np.float32]:
+    """Active-stereo depth (see the module docstring)."""
+    finite = np.isfinite(ren.z)
+    h, w = ren.z.shape
+    fb = np.float32(model.intrinsics.fx * model.baseline_m)
+    disp = np.where(finite, fb / np.maximum(ren.z, 1e-3), 0.0).astype(np.float32)
+    # Second imager to the right: a pixel is hidden from it when a nearer surface within the
+    # next pixels to the right has a disparity that exceeds the pixel's own by more than its
+    # distance (the occlusion shadow left of every near edge).
+    # reach_m(u) = max over k = 1..m of disp(u + k) - k, doubled in log2(span) steps:
+    # reach_2m(u) = max(reach_m(u), reach_m(u + m) - m).
+    reach = np.full((h, w), -np.inf, np.float32)
+    reach[:, :-1] = disp[:, 1:] - np.float32(1.0)
+    span = int(min(np.ceil(disp.max() - disp[finite].min()), 128)) if finite.any() else 0
+    m = 1
+    while m < span:
+        nxt = reach.copy()
+        nxt[:, :-m] = np.maximum(reach[:, :-m], reach[:, m:] - np.float32(m))
+        reach, m = nxt, 2 * m
+    occluded = reach > disp + np.float32(0.5)
+    # Block matching fattens the foreground: background pixels next to a much nearer one take
+    # its disparity (half of them, within 2 px).
+    dil = cv2.dilate(disp, np.ones((5, 5), np.uint8))
+    fat = (dil > disp * np.float32(1.08) + np.float32(0.5)) & (rng.random((h, w)) < 0.5)
+    d = np.where(fat, dil, disp)
+    # Sub-pixel noise, independent plus correlated (speckle pattern of the projector).
+    small = structured_light._noise((h // 8 + 2, w // 8 + 2), rng)
+    corr = cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
+    d = d + np.float32(model.disparity_sigma_px) * (
+        structured_light._noise((h, w), rng) + np.float32(0.8) * corr)
+    out = (fb / np.maximum(d, np.float32(1e-3))).astype(np.float32)
+    # Invalid: no surface, occluded, grazing, low texture on weak returns, small blobs.
+    cos_inc = _cos_incidence(ren)
+    lum = ren.color @ np.array([0.3, 0.55, 0.15], np.float32)
+    weak = (lum < 0.12) & (rng.random((h, w), dtype=np.float32) < 0.5)
+    missing = ~finite | occluded | (cos_inc < np.float32(np.cos(np.deg2rad(80.0)))) | weak
+    n_blobs = rng.poisson(3e-4 * h * w)
+    bv, bu = rng.integers(0, h, n_blobs), rng.integers(0, w, n_blobs)
+    for dv in (0, 1):
+        for du in (0, 1):
+            missing[np.minimum(bv + dv, h - 1), np.minimum(bu + du, w - 1)] = True
+    missing |= (out < model.z_min) | (out > model.z_max)
+    out[missing] = np.nan
+    return out
