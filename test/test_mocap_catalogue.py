@@ -122,3 +122,12 @@ def test_committed_data_is_small_and_has_notices():
             folder: Path = catalogue.DATA_DIR / source
             assert (folder / 'NOTICE.md').is_file()
             assert list(folder.glob('LICENSE*'))
+
+
+def test_load_by_name(committed):
+    want = [committed[3].name, committed[0].name]
+    got = catalogue.load_clips(names=want, committed_only=True)
+    assert [c.name for c in got] == [committed[0].name, committed[3].name]
+    np.testing.assert_array_equal(got[1].positions, committed[3].positions)
+    with pytest.raises(MocapError, match='unknown clips'):
+        catalogue.load_clips(names=['deepmimic/nope'])

@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -280,13 +280,21 @@ def load_clip(entry: Entry, cache_dir: str | Path | None = None) -> MotionClip:
                       src.load(path, entry), src.licence)
 
 
-def load_clips(*, cache_dir: str | Path | None = None,
-               committed_only: bool = False) -> list[MotionClip]:
+def load_clips(*, cache_dir: str | Path | None = None, committed_only: bool = False,
+               names: Collection[str] | None = None) -> list[MotionClip]:
     """Every committed clip, plus the fetched ones found in the cache (unless
-    ``committed_only``). A committed file that is missing is an error; a fetched one that
-    is missing is skipped (its source was not fetched)."""
+    ``committed_only``), in table order; ``names`` keeps only those clips (``source/stem``).
+    A committed file that is missing is an error; a fetched one that is missing is skipped
+    (its source was not fetched)."""
+    if names is not None:
+        unknown = sorted(set(names) - {e.name for e in CLIPS})
+        if unknown:
+            msg = f'unknown clips {unknown}'
+            raise MocapError(msg)
     out = []
     for entry in CLIPS:
+        if names is not None and entry.name not in names:
+            continue
         if not SOURCES[entry.source].committed:
             if committed_only or not entry_path(entry, cache_dir).is_file():
                 continue
