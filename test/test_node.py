@@ -10,7 +10,7 @@ import pytest
 import rclpy
 from ros_helpers import image_msg, info_msg, spin_until
 
-from endeff_ros.core.errors import InputError
+from endeff_ros.core.errors import InputError, ParameterError
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.single_frame import EntityEstimate, FrameEstimate
 from endeff_ros.core.tracker import TrackerResult
@@ -81,9 +81,10 @@ class Harness:
         self.tracker: FakeTracker = self.node.tracker
         self.tester = rclpy.create_node('tester', namespace=self.ns)
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-        self.pub = {'color': self.tester.create_publisher(Image, 'color/image_raw', qos),
-                    'depth': self.tester.create_publisher(Image, 'depth/image_raw', qos),
-                    'info': self.tester.create_publisher(CameraInfo, 'depth/camera_info', qos)}
+        self.pub = {'info': self.tester.create_publisher(CameraInfo, 'depth/camera_info', qos)}
+        if overrides.get('image_transport', 'raw') == 'raw':  # else the test publishes
+            self.pub['color'] = self.tester.create_publisher(Image, 'color/image_raw', qos)
+            self.pub['depth'] = self.tester.create_publisher(Image, 'depth/image_raw', qos)
         self.clouds: list = []
         self.markers: list = []
         self.tester.create_subscription(PointCloud2, 'end_effectors', self.clouds.append, qos)
@@ -426,3 +427,62 @@ def test_debug_outputs_switch_at_runtime(harness):
     assert convert.stamp_to_ns(image.header.stamp) == 13_100_000_000
     drawn = convert.color_image_to_array(image)
     assert (drawn != 90).any()  # the track was drawn over the uniform input colour
+
+
+def _compressed(stamp_ns: int, frame_id: str, fmt_data: tuple[str, bytes]):
+    from sensor_msgs.msg import CompressedImage
+
+    fmt, data = fmt_data
+    msg = CompressedImage(format=fmt, data=data)
+    msg.header = convert.make_header(stamp_ns, frame_id)
+    return msg
+
+
+def _send_compressed(h: Harness, pubs: dict, stamp_ns: int, depth_m: float) -> None:
+    from endeff_ros import image_codecs
+
+    count = h.node.stats.received['camera_info']
+    h.pub['info'].publish(info_msg(stamp_ns, FRAME_ID, W, H))
+    assert spin_until(h.executor, lambda: h.node.stats.received['camera_info'] > count)
+    rgb = np.full((H, W, 3), 90, np.uint8)
+    pubs['color'].publish(_compressed(stamp_ns + 3_000_000, 'color_frame',
+                                      image_codecs.encode_color(rgb, 'rgb8', 'jpeg')))
+    mm = np.full((H, W), 3800, np.uint16)
+    mm[5, 7] = round(depth_m * 1000)
+    pubs['depth'].publish(_compressed(stamp_ns, FRAME_ID,
+                                      image_codecs.encode_depth(mm, '16UC1')))
+
+
+@pytest.mark.parametrize('transport', ['compressed', 'auto'])
+def test_compressed_image_transport(harness, transport):
+    """image_transport's compressed colour and compressedDepth topics feed the node when told
+    to (``compressed``), or when only they have publishers (``auto``); the depth is decoded
+    losslessly, so the end-effector lies where the raw image would put it."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import CompressedImage
+
+    h = harness(image_transport=transport)
+    qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    pubs = {'color': h.tester.create_publisher(CompressedImage, 'color/image_raw/compressed',
+                                               qos),
+            'depth': h.tester.create_publisher(CompressedImage,
+                                               'depth/image_raw/compressedDepth', qos)}
+    # ``auto`` switches once it sees that only the compressed topics have publishers.
+    assert spin_until(h.executor, lambda: all(p.get_subscription_count() > 0
+                                              for p in pubs.values())), 'no subscription'
+    for k in range(3):
+        _send_compressed(h, pubs, 1_000_000_000 + k * 33_333_333, depth_m=1.2)
+    assert h.wait_clouds(1), h.node.snapshot()
+    points = convert.cloud_to_array(h.clouds[-1])
+    assert len(points) == 1 and points['z'][0] == pytest.approx(1.2, abs=1e-3)
+    assert h.node.stats.bad_input == 0
+
+
+def test_bad_image_transport_is_refused(ros_context):
+    from rclpy.parameter import Parameter
+
+    from endeff_ros.ros.node import EndeffNode
+
+    with pytest.raises(ParameterError, match='image_transport'):
+        EndeffNode(tracker_factory=FakeTracker, namespace='/bad_transport',
+                   parameter_overrides=[Parameter('image_transport', value='theora')])

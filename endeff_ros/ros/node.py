@@ -32,7 +32,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
 from endeff_ros.core.errors import InputError, ParameterError
@@ -59,6 +59,10 @@ except ImportError:  # pragma: no cover - diagnostic_msgs is part of common_inte
 
 _TOPICS = {'color': 'color/image_raw', 'depth': 'depth/image_raw',
            'camera_info': 'depth/camera_info'}
+#: image_transport's compressed topics of the image inputs (``compressed``, ``compressedDepth``).
+_COMPRESSED = {'color': 'color/image_raw/compressed', 'depth': 'depth/image_raw/compressedDepth'}
+#: How often ``image_transport: auto`` looks for publishers until an image input has a message.
+_AUTO_PERIOD_S = 0.5
 
 
 def _stamp(msg: Any) -> int:
@@ -73,7 +77,7 @@ def _frame(msgs: dict[str, Any], early: Early | None, early_flow: Early | None) 
         return convert.frame_from_messages(color, depth, info)
     base = early.data if early else convert.frame_from_messages(None, depth, info)
     rgb = (early_flow.data if early_flow else
-           None if color is None else convert.color_image_to_array(color))
+           None if color is None else convert.any_color_to_array(color))
     return dataclasses.replace(base, color=rgb)
 
 
@@ -110,12 +114,14 @@ class EndeffNode(Node):
             self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         else:  # pragma: no cover
             self.pub_diag = self.create_publisher(String, '~/statistics', 10)
-        qos_in = qos(self._p('input_reliability'), self._p('input_queue_depth'))
+        self._qos_in = qos(self._p('input_reliability'), self._p('input_queue_depth'))
+        transport = self._p('image_transport')
         # Camera info first: when several inputs are ready, the executor serves it first.
-        self._subs = [self.create_subscription(CameraInfo if kind == 'camera_info' else Image,
-                                               _TOPICS[kind], partial(self._on_input, kind),
-                                               qos_in)
-                      for kind in reversed(self.scheduler.inputs)]
+        self._subs = {kind: self._subscribe(kind, compressed=transport == 'compressed'
+                                            and kind != 'camera_info')
+                      for kind in reversed(self.scheduler.inputs)}
+        self._auto = self.create_timer(_AUTO_PERIOD_S, self._choose_transport) if (
+            transport == 'auto') else None
         self._jump = self.get_clock().create_jump_callback(
             JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1),
                           on_clock_change=False), post_callback=self._on_clock_jump)
@@ -140,6 +146,31 @@ class EndeffNode(Node):
     # ---------------------------------------------------------------- parameters and inputs
     def _p(self, name: str) -> Any:
         return self.get_parameter(name).value
+
+    def _subscribe(self, kind: str, *, compressed: bool) -> Any:
+        if kind == 'camera_info':
+            return self.create_subscription(CameraInfo, _TOPICS[kind],
+                                            partial(self._on_input, kind), self._qos_in)
+        topic, msg_type = (_COMPRESSED[kind], CompressedImage) if compressed else (
+            _TOPICS[kind], Image)
+        return self.create_subscription(msg_type, topic, partial(self._on_input, kind),
+                                        self._qos_in)
+
+    def _choose_transport(self) -> None:
+        """``image_transport: auto``: an image input that has had no message yet, whose raw
+        topic has no publisher while its compressed topic has one, switches to the compressed
+        topic. Stops looking once every image input has had a message."""
+        waiting = [k for k in ('color', 'depth') if k in self._subs
+                   and not self.stats.received[k]]
+        for kind in waiting:
+            raw, packed = (self.resolve_topic_name(t) for t in (_TOPICS[kind], _COMPRESSED[kind]))
+            if (self._subs[kind].topic_name == raw and not self.count_publishers(raw)
+                    and self.count_publishers(packed)):
+                self.get_logger().info(f'{raw} has no publisher: subscribing to {packed}')
+                self.destroy_subscription(self._subs[kind])
+                self._subs[kind] = self._subscribe(kind, compressed=True)
+        if not waiting and self._auto is not None:
+            self._auto.cancel()
 
     def dropped(self) -> dict[str, int]:
         """Messages the synchroniser dropped unpaired, per input."""
@@ -247,7 +278,7 @@ class EndeffNode(Node):
             return False
         t0 = time.perf_counter()
         try:
-            array = convert.color_image_to_array(color)
+            array = convert.any_color_to_array(color)
             with self._tracker_lock:  # the flow reads the tracks and the previous image
                 updates = self._updates
                 flow = flow_fn(array, convert.camera_info_to_intrinsics(info))

@@ -20,6 +20,7 @@ from endeff_ros.core.params import EndeffParams
 T = TypeVar('T')
 
 RELIABILITIES = ('best_effort', 'reliable')
+TRANSPORTS = ('raw', 'compressed', 'auto')
 
 
 def _row(name: str, default: Any, doc: str, *, lo: float | None = None,
@@ -36,6 +37,10 @@ NODE_PARAMS: list[dict[str, Any]] = [
          "(matches both kinds of subscriber) or 'best_effort'.", runtime=False),
     _row('input_queue_depth', 5, 'History depth of the input subscriptions.', lo=1, hi=100,
          runtime=False),
+    _row('image_transport', 'raw', "Image topics to subscribe to: 'raw' (color/image_raw, "
+         "depth/image_raw), 'compressed' (image_transport's color/image_raw/compressed and "
+         "depth/image_raw/compressedDepth) or 'auto' (raw, switching an image input to its "
+         "compressed topic when only that one has publishers).", runtime=False),
     _row('use_color', True, 'Synchronise the colour image (needed by the optical-flow '
          'predict phase); false: depth and camera info only.', runtime=False),
     _row('sync_queue_size', 10, 'Approximate-time synchroniser: messages kept per input.',
@@ -87,6 +92,9 @@ def validate_node_changes(changes: dict[str, Any]) -> None:
         if key in changes and changes[key] not in RELIABILITIES:
             msg = f'{key} must be one of {RELIABILITIES}, not {changes[key]!r}'
             raise ParameterError(msg)
+    if 'image_transport' in changes and changes['image_transport'] not in TRANSPORTS:
+        msg = f"image_transport must be one of {TRANSPORTS}, not {changes['image_transport']!r}"
+        raise ParameterError(msg)
 
 
 class LatestSlot(Generic[T]):
