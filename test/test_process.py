@@ -244,3 +244,14 @@ def test_synth_bags_both_storages(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
             clouds = [m for t, _, _, m in msgs if t == OUTPUT_CLOUD]
             assert [convert.stamp_to_ns(m.header.stamp) for m in clouds] == stamps
             assert all(m.header.frame_id.endswith('optical_frame') for m in clouds)
+
+
+def test_cloud_typestore_matches_jazzy() -> None:
+    """The small store written into output bags defines the cloud exactly as Jazzy does."""
+    from endeff_ros.bag.process import CLOUD_TYPE, cloud_typestore
+    from endeff_ros.bag.reader import typestore
+
+    small, jazzy = cloud_typestore(), typestore()
+    assert small.generate_msgdef(CLOUD_TYPE, ros_version=2) == jazzy.generate_msgdef(
+        CLOUD_TYPE, ros_version=2)
+    assert small.hash_rihs01(CLOUD_TYPE) == jazzy.hash_rihs01(CLOUD_TYPE)
