@@ -260,7 +260,9 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
 
 
 def _is_person_sequence(name: str, attributes: dict[str, Any]) -> bool:
-    """People in view: the attribute ``people`` > 0, else a person sequence of the paper suite."""
+    """People in view: the attribute ``people`` > 0, else a sequence of people of the paper
+    suite (its person sequences, and ``two_people`` of the generic group, whose second person's
+    ids are the first's + 5)."""
     people = attributes.get('people')
     if isinstance(people, int | float) and not isinstance(people, bool):
         return people > 0
@@ -268,7 +270,7 @@ def _is_person_sequence(name: str, attributes: dict[str, Any]) -> bool:
         from endeff_ros.synth.sequences import PERSON_SEQUENCES
     except Exception:  # the generator is optional for scoring
         return False
-    return name.rsplit('/', 1)[-1] in PERSON_SEQUENCES
+    return name.rsplit('/', 1)[-1] in (*PERSON_SEQUENCES, 'two_people')
 
 
 def _gt_ids(bag: BagReader) -> dict[int, npt.NDArray[np.int64]]:

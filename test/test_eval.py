@@ -308,3 +308,18 @@ def test_attribute_groups_and_kinds(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert 'split' in table.splitlines()[1]
     assert any(line.startswith('a ') and ' dev ' in line for line in table.splitlines())
     assert 'per kind' in table and 'hand' in table
+
+
+def test_paper_person_sequences_have_kinds(tmp_path: Path) -> None:
+    pytest.importorskip('endeff_ros.synth.sequences', reason='synthetic generator not present')
+    people = dict(frames=2, width=160, n_blobs=5)
+    for name in ('jumping_jacks', 'two_people', 'chair', 'punching'):
+        write_bag(tmp_path / name, BagSpec(**people))
+    # The attribute wins over the name: no people in this 'punching'.
+    _set_custom_data(tmp_path / 'punching', {'endeff.attributes': '{"people": 0}'})
+    report, _ = evaluate_bags([tmp_path], estimate_fn=fake_estimate_frame,
+                              tracker_factory=FakeTracker)
+    kinds = {s['bag']: list(s['kinds']['temporal']) for s in report['sequences']}
+    assert kinds == {'jumping_jacks': ['head', 'hand', 'foot'],
+                     'two_people': ['head', 'hand', 'foot'],
+                     'chair': ['other'], 'punching': ['other']}
