@@ -416,27 +416,34 @@ def _group_sections(groups: dict[str, Any]) -> list[tuple[str, list[str]]]:
 
 
 def _kind_table(report: dict[str, Any], width: int) -> list[str]:
-    """Recall and mean error per kind for overall and each group (empty without kinds)."""
-    rows = [('overall', report.get('kinds', {}))]
-    rows += [(g, d.get('kinds', {})) for g, d in report['groups'].items()]
-    kinds = [k for k in KINDS if any(k in d.get(m, {}) for _, d in rows for m in METHODS)]
+    """Recall and mean error per kind for overall and each group, in the sections of the main
+    table (empty without kinds)."""
+    groups = report['groups']
+    all_kinds = [report.get('kinds', {})] + [d.get('kinds', {}) for d in groups.values()]
+    kinds = [k for k in KINDS if any(k in d.get(m, {}) for d in all_kinds for m in METHODS)]
     if not kinds:
         return []
     cell = 14 * len(kinds)
     head = (f'{"per kind":{width}} | {"temporal: recall / err m":^{cell}} | '
             f'{"single-frame: recall / err m":^{cell}}\n{"":{width}} | '
             + ' | '.join(''.join(f'{k:^14}' for k in kinds) for _ in METHODS))
-    lines = [head, '-' * len(head.splitlines()[1])]
-    for name, d in rows:
-        if not any(d.get(m) for m in METHODS):
-            continue
+    rule = '-' * len(head.splitlines()[1])
+
+    def row(name: str, d: dict[str, Any]) -> str:
         cells = []
         for m in METHODS:
             per = d.get(m, {})
             cells.append(''.join(
                 f'{_num(per[k]["recall"], ".3f"):>7}{_num(per[k]["mean_error_m"], ".3f"):>7}'
                 if k in per else f'{"":14}' for k in kinds))
-        lines.append(f'{name:{width}} | ' + ' | '.join(cells))
+        return f'{name:{width}} | ' + ' | '.join(cells)
+
+    lines = [head, rule, row('overall', report.get('kinds', {}))]
+    for section, names in _group_sections(groups):
+        shown = [g for g in names if any(groups[g].get('kinds', {}).get(m) for m in METHODS)]
+        if shown:
+            lines.append(f'-- {section} ' + '-' * max(0, len(rule) - len(section) - 4))
+            lines += [row(g, groups[g]['kinds']) for g in shown]
     return lines
 
 
