@@ -136,7 +136,7 @@ def tof_depth(ren: Rendered, model: SensorModel,
     amp = lum * np.maximum(cos_inc, 0.05) / np.maximum(z, 0.3) ** 2 * np.float32(4.0)
     sigma = np.float32(model.tof_sigma_m) * z / np.sqrt(np.maximum(amp, 0.02))
     out += structured_light._noise((h, w), rng) * sigma
-    p_drop = np.clip((0.06 - amp) / 0.05, 0.0, 1.0)  # weak returns: dark, far or grazing
+    p_drop = np.clip((0.08 - amp) / 0.06, 0.0, 1.0)  # weak returns: dark, far or grazing
     missing = ~finite | (rng.random((h, w), dtype=np.float32) < p_drop)
     missing |= cos_inc < np.float32(np.cos(np.deg2rad(85.0)))
     missing |= (out < model.z_min) | (out > model.z_max)

@@ -217,7 +217,8 @@ def _spec(i: int, clip: MotionClip, order: list[MotionClip], pos: dict, n: int, 
 class BagRenderer:
     """Renders one ``BagSpec``: ``frames()`` yields the ``SynthFrame``s in order; afterwards
     ``truncated`` says whether any listed ground-truth point projected outside the image,
-    ``clutter`` names the furniture, ``camera`` is the camera used."""
+    ``furniture`` holds (kind, primitives) of each piece (scene frame), ``clutter`` their
+    kinds, ``camera`` is the camera used."""
 
     def __init__(self, spec: BagSpec, clips: dict[str, MotionClip]) -> None:
         missing = [p.clip for p in spec.people if p.clip not in clips]
@@ -244,6 +245,7 @@ class BagRenderer:
             self.carry = np.array([rng.uniform(0.14, 0.2), rng.uniform(0.08, 0.15),
                                    rng.uniform(0.1, 0.16)])
         furniture = self._furnish(rng)
+        self.furniture = furniture
         self.clutter = [k for k, _ in furniture]
         far = max(-float(j[:, _J['pelvis'], 2].min()) for j in self.joints)
         wall_z = -(far + float(rng.uniform(0.45, 0.9))) if spec.room == 'wall' else -5.5

@@ -115,7 +115,7 @@ def place(positions: npt.ArrayLike, view: View) -> tuple[npt.NDArray[np.float64]
     out = (p - centre) @ rot.T
     anchor = np.array([view.offset_x_m, 0.0, -view.distance_m])
     if kind == 'towards':  # stop before the camera: nearest pelvis at least NEAREST_M away
-        nearest = -(out[:, _J['pelvis'], 2] + anchor[2]).min()
+        nearest = -float((out[:, _J['pelvis'], 2] + anchor[2]).max())
         if nearest < NEAREST_M:
             anchor[2] -= NEAREST_M - nearest
     return out + anchor, kind

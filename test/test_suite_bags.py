@@ -1,0 +1,127 @@
+"""Mocap suite: the spec list, attributes in the rosbag2 metadata, and a tiny end-to-end run
+written and read back with the project's bag reader."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+import yaml
+from rosbags.highlevel import AnyReader
+
+from endeff_ros.attributes import ATTRIBUTES_KEY, custom_data, parse_attributes
+from endeff_ros.bag.reader import read_frames
+from endeff_ros.synth import cli as synth_cli
+from endeff_ros.synth.proc_clips import sit_clip, walk_clip, wave_clip
+from endeff_ros.synth.sensors import SENSORS
+from endeff_ros.synth.suite import (
+    DETAILS_KEY,
+    QUICK_FRAMES,
+    BagRenderer,
+    suite_specs,
+    write_bag,
+)
+
+KEYS = {'source', 'family', 'split', 'view', 'camera_height_m', 'distance_m', 'sensor', 'room',
+        'people', 'truncated'}
+
+
+@pytest.fixture(scope='module')
+def clips():
+    return [walk_clip(60, name='walk_a'), walk_clip(60, 1.0, 'walk_b', 'test'),
+            walk_clip(45, 1.5, 'walk_c', 'test'), sit_clip(60), wave_clip(40),
+            wave_clip(40, name='wave_b', split='dev')]
+
+
+def test_quick_spec_list(clips):
+    specs = suite_specs(clips, quick=True)
+    assert len(specs) >= 40
+    assert len({s.name for s in specs}) == len(specs)
+    assert {s.attributes['split'] for s in specs} == {'dev', 'test'}
+    assert len({s.sensor for s in specs}) >= 3
+    assert {s.attributes['view'] for s in specs} == {'front', 'side', 'back', 'across',
+                                                     'towards'}
+    assert {s.room for s in specs} == {'empty', 'furnished', 'wall'}
+    assert {len(s.people) for s in specs} == {1, 2, 3}
+    for s in specs:
+        assert s.frames == QUICK_FRAMES
+        assert s.name.startswith(s.attributes['split'] + '__')
+        assert KEYS - {'truncated'} <= set(s.attributes)
+        assert 1.2 <= s.attributes['distance_m'] <= 5.0
+        assert 0.6 <= s.attributes['camera_height_m'] <= 2.2
+        assert all(p.body.child or 1.5 <= p.body.height_m <= 1.95 for p in s.people)
+        # No clip of the other split in a bag (people of a bag share the split).
+        split = {c.name: c.split for c in clips}
+        assert {split[p.clip] for p in s.people} == {s.attributes['split']}
+    sit = [s for s in specs if s.people[0].clip == 'proc_sit']
+    assert sit and all(s.interaction == 'sit' for s in sit)
+    assert specs == suite_specs(clips, quick=True)  # deterministic
+    assert specs != suite_specs(clips, quick=True, seed=1)
+
+
+def test_full_spec_list_covers_every_clip(clips):
+    specs = suite_specs(clips)
+    assert {c.name for c in clips} <= {s.people[0].clip for s in specs}
+    longest = {c.name: len(c.positions) for c in clips}
+    for s in specs:
+        assert s.frames == min(longest[s.people[0].clip], 600)
+
+
+def test_only_patterns(clips):
+    specs = suite_specs(clips, quick=True)
+    dev = synth_cli.select_specs(specs, 'dev__*')
+    assert dev and all(s.attributes['split'] == 'dev' for s in dev)
+    both = synth_cli.select_specs(specs, 'dev__*,*-d435-*')
+    assert len(both) > len(dev)
+    with pytest.raises(ValueError, match='nope'):
+        synth_cli.select_specs(specs, 'nope*')
+
+
+def _small(specs, **want):
+    for s in specs:
+        if all(s.attributes.get(k) == v for k, v in want.items()):
+            return dataclasses.replace(s, frames=5)
+    raise AssertionError(want)
+
+
+def test_bags_end_to_end(clips, tmp_path):
+    specs = suite_specs(clips, quick=True)
+    byname = {c.name: c for c in clips}
+    chosen = [_small(specs, people=2), _small(specs, sensor='kinect_v2', people=1),
+              _small(specs, room='furnished', people=1)]
+    for spec in chosen:
+        out = write_bag(spec, byname, tmp_path)
+        assert out['frames'] == 5
+        bag = tmp_path / 'mcap' / spec.name
+        # Attributes in the metadata, read back two ways.
+        meta = yaml.safe_load((bag / 'metadata.yaml').read_text())
+        raw = meta['rosbag2_bagfile_information']['custom_data']
+        with AnyReader([bag]) as reader:
+            attrs, warning = parse_attributes(custom_data(reader), spec.name)
+            details = json.loads(custom_data(reader)[DETAILS_KEY])
+        assert warning is None and KEYS <= set(attrs)
+        assert json.loads(raw[ATTRIBUTES_KEY]) == attrs
+        assert attrs == {k: v for k, v in out.items() if k != 'frames'}
+        assert attrs['sensor'] == spec.sensor and attrs['people'] == len(spec.people)
+        assert details['people'][0]['clip'] == spec.people[0].clip
+        if spec.room == 'furnished':
+            assert attrs['clutter']
+        # Frames through the project's reader: size and intrinsics of the sensor, ground
+        # truth of every person (5 ids each) equal to the renderer's.
+        intr = SENSORS[spec.sensor].intrinsics
+        expect = {f.stamp_ns: f for f in BagRenderer(spec, byname).frames()}
+        n = 0
+        for frame, gt in read_frames(bag):
+            assert frame.depth.shape == (intr.height, intr.width)
+            assert (frame.intrinsics.fx, frame.intrinsics.cx) == (intr.fx, intr.cx)
+            ref = expect[frame.stamp_ns]
+            assert gt is not None and len(gt) == len(ref.gt)
+            np.testing.assert_allclose(np.asarray(gt)[:, :3], ref.gt, atol=1e-5)
+            assert len(ref.gt_ids) in (5 * k for k in range(1, len(spec.people) + 1))
+            np.testing.assert_array_equal(np.isfinite(frame.depth), np.isfinite(ref.depth))
+            np.testing.assert_allclose(frame.depth[np.isfinite(frame.depth)],
+                                       ref.depth[np.isfinite(ref.depth)], atol=1e-6)
+            n += 1
+        assert n >= 3  # a dropped frame or two at most
