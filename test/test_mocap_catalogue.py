@@ -131,3 +131,22 @@ def test_load_by_name(committed):
     np.testing.assert_array_equal(got[1].positions, committed[3].positions)
     with pytest.raises(MocapError, match='unknown clips'):
         catalogue.load_clips(names=['deepmimic/nope'])
+
+
+def test_looped_cycles_are_long_and_smooth(committed):
+    looped = {c.name: c for c in catalogue.load_clips(committed_only=True, loop_s=6.0)}
+    for c in committed:
+        lc = looped[c.name]
+        step = np.linalg.norm(np.diff(c.positions, axis=0), axis=2).max()
+        lstep = np.linalg.norm(np.diff(lc.positions, axis=0), axis=2).max()
+        if lc.duration_s > c.duration_s:
+            assert lc.duration_s >= 6.0 - 1 / 30, c.name
+            # the seam between cycles is no bigger a jump than the clip's own motion
+            assert lstep < 1.2 * step + 0.01, c.name
+        else:
+            np.testing.assert_array_equal(lc.positions, c.positions)
+    walk = looped['deepmimic/humanoid3d_walk'].positions
+    assert walk[-1, J['pelvis'], 2] > 4.0   # 6 s of walking at about 1 m/s, straight on
+    assert abs(walk[-1, J['pelvis'], 0]) < 0.15 * walk[-1, J['pelvis'], 2]
+    assert sum(lc.duration_s > c.duration_s for c, lc in
+               zip(committed, looped.values(), strict=True)) >= 6

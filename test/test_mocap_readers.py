@@ -16,8 +16,8 @@ import pytest
 from endeff_ros.synth.mocap import catalogue, deepmimic, fetch
 from endeff_ros.synth.mocap.bvh import parse_bvh
 from endeff_ros.synth.mocap.clip import JOINT_INDEX as J
-from endeff_ros.synth.mocap.kin import MocapError
-from endeff_ros.synth.mocap.retarget import resample, unit_scale
+from endeff_ros.synth.mocap.kin import MocapError, axis_rotation
+from endeff_ros.synth.mocap.retarget import loop_cycles, resample, unit_scale
 from endeff_ros.synth.mocap.sources import BANDAI_MAP, load_bvh_positions
 
 # -- BVH basics ---------------------------------------------------------------------------------
@@ -266,6 +266,42 @@ def test_trim_window_and_skip(tmp_path):
     np.testing.assert_allclose(pos[-1, J['pelvis'], 0], 1.0, atol=1e-9)
 
 
+def test_loop_cycles_continue_a_turning_motion():
+    # a rigid pose turning about the vertical axis through the origin: looping one cycle must
+    # give exactly the same motion continued, at every later time
+    rng = np.random.default_rng(5)
+    base = rng.normal(0.0, 0.3, (len(J), 3)) + [0.5, 1.0, 0.0]
+    base[J['l_hip']] = (0.6, 0.9, 0.0)
+    base[J['r_hip']] = (0.4, 0.9, 0.0)
+    omega, times = 0.8, np.linspace(0.0, 1.2, 13)
+
+    def pose(t):
+        return base @ axis_rotation('y', omega * t).T
+
+    pos = np.stack([pose(t) for t in times])
+    out, out_t = loop_cycles(pos, times, 4.0)
+    assert out_t[-1] >= 4.0 and np.all(np.diff(out_t) > 0)
+    np.testing.assert_allclose(out, np.stack([pose(t) for t in out_t]), atol=1e-9)
+    same, same_t = loop_cycles(pos, times, 1.0)
+    assert same is pos and same_t is times
+    # a small mismatch of the last frame is faded in: the seam is then continuous
+    bent = pos.copy()
+    bent[-1, J['l_wrist']] += (0.05, 0.0, 0.0)
+    out, out_t = loop_cycles(bent, times, 4.0)
+    n = len(bent)
+    assert len(out) == len(out_t) > n
+    np.testing.assert_allclose(out[:n - 3], bent[:n - 3], atol=1e-12)   # before the fade
+
+    def shape(p):   # joint-to-joint distances: equal for rigidly moved copies of a pose
+        return np.linalg.norm(p[..., :, None, :] - p[..., None, :, :], axis=-1)
+
+    np.testing.assert_allclose(shape(out[n - 1]), shape(bent[0]), atol=1e-9)  # seam closed
+    np.testing.assert_allclose(shape(out[n:2 * n - 1]), shape(out[1:n]), atol=1e-9)
+    # a motion that does not come back to its start is no cycle: left unchanged
+    bent[-1, J['l_wrist']] += (0.5, 0.0, 0.0)
+    assert loop_cycles(bent, times, 4.0)[0] is bent
+
+
 # -- DeepMimic ----------------------------------------------------------------------------------
 
 
@@ -297,7 +333,8 @@ def _dm_col(joint: str) -> int:
 
 
 def test_deepmimic_identity_pose_is_the_offset_table():
-    times, _, pos = deepmimic.parse_deepmimic(_dm_text(_dm_rows()))
+    times, _, pos, wrap = deepmimic.parse_deepmimic(_dm_text(_dm_rows()))
+    assert not wrap
     np.testing.assert_allclose(times, [0.0, 1 / 30])
     parent = {n: p for n, p, _ in deepmimic.JOINTS}
     for k, name in enumerate(deepmimic.NAMES):
@@ -318,7 +355,7 @@ def test_deepmimic_joint_rotations_move_children():
     rows[1, _dm_col('right_knee')] = np.pi / 2                 # revolute, about z
     c = _dm_col('left_shoulder')
     rows[1, c:c + 4] = (np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0)   # 90 deg about x
-    _, _, pos = deepmimic.parse_deepmimic(_dm_text(rows))
+    pos = deepmimic.parse_deepmimic(_dm_text(rows)).pos
     idx = deepmimic.NAMES.index
     np.testing.assert_allclose(pos[1, idx('right_ankle')] - pos[1, idx('right_knee')],
                                [0.40987, 0.0, 0.0], atol=1e-12)

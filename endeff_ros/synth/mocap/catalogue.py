@@ -54,18 +54,19 @@ class Source:
     name: str
     committed: bool
     licence: str
-    load: Callable[[Path, Entry], F64]
+    load: Callable[[Path, Entry, float | None], F64]
 
 
-def _bvh(source: str, skip: int = 0) -> Callable[[Path, Entry], F64]:
-    def load(path: Path, entry: Entry) -> F64:
+def _bvh(source: str, skip: int = 0) -> Callable[[Path, Entry, float | None], F64]:
+    def load(path: Path, entry: Entry, loop_s: float | None) -> F64:
         return load_bvh_positions(path, BVH_MAPS[source], window=entry.window, skip=skip)
     return load
 
 
 SOURCES: dict[str, Source] = {
     'deepmimic': Source('deepmimic', True, 'MIT (DeepMimic) and zlib (pybullet_data)',
-                        lambda p, e: load_deepmimic_positions(p, window=e.window)),
+                        lambda p, e, loop: load_deepmimic_positions(p, window=e.window,
+                                                                    loop_s=loop)),
     'bandai': Source('bandai', False, 'CC BY-NC 4.0 (Bandai Namco Research Motiondataset)',
                      _bvh('bandai')),
     # The iClone conversion puts a T-pose before some clips' first frame: drop frame 0 always.
@@ -269,23 +270,28 @@ def entry_path(entry: Entry, cache_dir: str | Path | None = None) -> Path:
     return root / entry.source / entry.file
 
 
-def load_clip(entry: Entry, cache_dir: str | Path | None = None) -> MotionClip:
-    """One catalogue entry as a ``MotionClip`` (30 Hz, body frame)."""
+def load_clip(entry: Entry, cache_dir: str | Path | None = None, *,
+              loop_s: float | None = None) -> MotionClip:
+    """One catalogue entry as a ``MotionClip`` (30 Hz, body frame); ``loop_s`` see
+    ``load_clips``."""
     src = SOURCES[entry.source]
     path = entry_path(entry, cache_dir)
     if not path.is_file():
         msg = f'clip {entry.name}: file {path} is missing'
         raise MocapError(msg)
     return MotionClip(entry.name, entry.source, entry.family, entry.split, FPS,
-                      src.load(path, entry), src.licence)
+                      src.load(path, entry, loop_s), src.licence)
 
 
 def load_clips(*, cache_dir: str | Path | None = None, committed_only: bool = False,
-               names: Collection[str] | None = None) -> list[MotionClip]:
+               names: Collection[str] | None = None,
+               loop_s: float | None = None) -> list[MotionClip]:
     """Every committed clip, plus the fetched ones found in the cache (unless
     ``committed_only``), in table order; ``names`` keeps only those clips (``source/stem``).
-    A committed file that is missing is an error; a fetched one that is missing is skipped
-    (its source was not fetched)."""
+    ``loop_s`` repeats the clips whose source file marks them as cycles (the short DeepMimic
+    walks, runs, turns, ...) until they last that long; the statistics of the catalogue are
+    measured without it. A committed file that is missing is an error; a fetched one that is
+    missing is skipped (its source was not fetched)."""
     if names is not None:
         unknown = sorted(set(names) - {e.name for e in CLIPS})
         if unknown:
@@ -298,7 +304,7 @@ def load_clips(*, cache_dir: str | Path | None = None, committed_only: bool = Fa
         if not SOURCES[entry.source].committed:
             if committed_only or not entry_path(entry, cache_dir).is_file():
                 continue
-        out.append(load_clip(entry, cache_dir))
+        out.append(load_clip(entry, cache_dir, loop_s=loop_s))
     return out
 
 

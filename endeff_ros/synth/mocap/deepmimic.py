@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -62,14 +63,26 @@ OFFSETS: dict[str, tuple[float, float, float]] = {
 }
 
 NAMES: tuple[str, ...] = tuple(j[0] for j in JOINTS)
+
+
+class Motion(NamedTuple):
+    """A parsed motion: frame ``times`` (T,) s; per joint of ``NAMES`` the global rotations
+    ``rot`` (T, J, 3, 3) and positions ``pos`` (T, J, 3) m (DeepMimic axes: y up, the character
+    facing +x); ``wrap`` if the file says the motion loops (its last frame ends a cycle that
+    the first frame starts again, moved along)."""
+
+    times: F64
+    rot: F64
+    pos: F64
+    wrap: bool
 N_COLUMNS = 1 + 3 + 4 + sum({'sphere': 4, 'revolute': 1}.get(k, 0) for _, _, k in JOINTS[1:])
 
 
-def parse_deepmimic(text: str, *, name: str = 'motion') -> tuple[F64, F64, F64]:
-    """Frame times (T,) s, and per joint of ``NAMES`` global rotations (T, J, 3, 3) and
-    positions (T, J, 3) in metres (DeepMimic axes: y up, the character facing +x)."""
+def parse_deepmimic(text: str, *, name: str = 'motion') -> Motion:
+    """Parse a humanoid3d motion (JSON text) and run its forward kinematics."""
     try:
-        frames = np.asarray(json.loads(text)['Frames'], dtype=np.float64)
+        data = json.loads(text)
+        frames = np.asarray(data['Frames'], dtype=np.float64)
     except (ValueError, KeyError, TypeError) as e:
         msg = f'{name}: not a DeepMimic motion (JSON with a "Frames" list of rows): {e}'
         raise MocapError(msg) from None
@@ -97,10 +110,10 @@ def parse_deepmimic(text: str, *, name: str = 'motion') -> tuple[F64, F64, F64]:
             col += 1
     parents = [NAMES.index(p) if p else -1 for _, p, _ in JOINTS]
     grot, gpos = forward(parents, rot, trans)
-    return times, grot, gpos
+    return Motion(times, grot, gpos, str(data.get('Loop', '')).lower() == 'wrap')
 
 
-def read_deepmimic(path: str | Path) -> tuple[F64, F64, F64]:
+def read_deepmimic(path: str | Path) -> Motion:
     """``parse_deepmimic`` of a file."""
     p = Path(path)
     try:

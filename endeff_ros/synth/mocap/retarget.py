@@ -143,6 +143,45 @@ def resample(pos: F64, times: F64, fps: float = FPS) -> F64:
     return (1.0 - w) * pos[k] + w * pos[k + 1]
 
 
+def loop_cycles(pos: F64, times: F64, min_s: float, *, max_gap: float = 0.1,
+                blend_s: float = 0.3) -> tuple[F64, F64]:
+    """A cyclic motion repeated until it lasts ``min_s`` seconds; positions (T, J, 3), y up.
+
+    Each repetition is the previous one moved by the rigid motion M (a turn about y and a
+    horizontal shift, fitted to all joints) that best takes frame 0 onto the last frame, so
+    walks go on and turns keep turning. Motion files marked as loops rarely close exactly:
+    the remaining gap ``M(frame 0) - last frame`` is faded in over the last ``blend_s`` seconds
+    of the cycle (smoothstep), so that cycle k + 1 = M(cycle k) starts where cycle k ends. A
+    motion whose gap exceeds ``max_gap`` metres at some joint is not a clean cycle and is
+    returned unchanged, as is one already ``min_s`` long.
+    """
+    period = float(times[-1] - times[0])
+    if period <= 0 or period >= min_s:
+        return pos, times
+    a = pos[0][:, [0, 2]] - pos[0][:, [0, 2]].mean(axis=0)
+    b = pos[-1][:, [0, 2]] - pos[-1][:, [0, 2]].mean(axis=0)
+    u, _, vt = np.linalg.svd(a.T @ b)
+    r2 = vt.T @ np.diag([1.0, np.linalg.det(vt.T @ u.T)]) @ u.T
+    rot = np.array([[r2[0, 0], 0.0, r2[0, 1]], [0.0, 1.0, 0.0], [r2[1, 0], 0.0, r2[1, 1]]])
+    c0 = pos[0].mean(axis=0) * [1.0, 0.0, 1.0]
+    c1 = pos[-1].mean(axis=0) * [1.0, 0.0, 1.0]
+
+    def move(p: F64) -> F64:
+        return (p - c0) @ rot.T + c1
+
+    gap = move(pos[0]) - pos[-1]
+    if np.linalg.norm(gap, axis=-1).max() > max_gap:
+        return pos, times
+    x = np.clip((times - times[-1] + blend_s) / blend_s, 0.0, 1.0)
+    cur = pos + (x * x * (3.0 - 2.0 * x))[:, None, None] * gap
+    parts, stamps = [cur], [times]
+    for k in range(1, int(np.ceil(min_s / period))):
+        cur = move(cur)
+        parts.append(cur[1:])
+        stamps.append(times[1:] + k * period)
+    return np.concatenate(parts), np.concatenate(stamps)
+
+
 def normalise(pos_m: F64, times: F64, *, up: F64 | None = None, fps: float = FPS) -> F64:
     """Canonical positions in metres (source axes) -> the ``MotionClip`` body frame at ``fps``.
 

@@ -31,7 +31,7 @@ import numpy as np
 from . import deepmimic
 from .bvh import read_bvh
 from .kin import F64, MocapError
-from .retarget import JointSpec, canonical, normalise
+from .retarget import JointSpec, canonical, loop_cycles, normalise
 
 
 def _sided(template: Mapping[str, JointSpec], left: str, right: str) -> dict[str, JointSpec]:
@@ -163,12 +163,19 @@ def load_bvh_positions(path: str | Path, joint_map: Mapping[str, JointSpec], *,
     return normalise(pos, times, up=up)
 
 
-def load_deepmimic_positions(path: str | Path, *,
-                             window: tuple[float, float] | None = None) -> F64:
-    """A DeepMimic humanoid3d motion retargeted and normalised (see ``load_bvh_positions``)."""
-    times, rot, pos = deepmimic.read_deepmimic(path)
-    frames = {n: (rot[:, k], pos[:, k]) for k, n in enumerate(deepmimic.NAMES)}
+def load_deepmimic_positions(path: str | Path, *, window: tuple[float, float] | None = None,
+                             loop_s: float | None = None) -> F64:
+    """A DeepMimic humanoid3d motion retargeted and normalised (see ``load_bvh_positions``).
+
+    ``loop_s``: a motion the file marks as looping is repeated (``retarget.loop_cycles``)
+    until it lasts that long; the others are left as they are.
+    """
+    motion = deepmimic.read_deepmimic(path)
+    frames = {n: (motion.rot[:, k], motion.pos[:, k]) for k, n in enumerate(deepmimic.NAMES)}
     offsets = {n: np.asarray(deepmimic.OFFSETS[n]) for n in deepmimic.NAMES}
     cpos, _ = canonical(frames, offsets, DEEPMIMIC_MAP, name=Path(path).name, scale=1.0)
+    times = motion.times
+    if loop_s is not None and motion.wrap:
+        cpos, times = loop_cycles(cpos, times, loop_s)
     times, cpos = _trim(times, cpos, window, Path(path).name)
     return normalise(cpos, times, up=np.array([0.0, 1.0, 0.0]))
