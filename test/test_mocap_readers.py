@@ -431,6 +431,11 @@ def test_fetch_reads_a_git_directory(tmp_path):
     res = fetch.fetch('bandai', src=str(repo / '.git'), dest=tmp_path / 'out')
     assert res.copied == [chosen]
     assert (tmp_path / 'out' / chosen).read_text().startswith('HIERARCHY')
+    # the same through a (shallow, blob-less) clone of a URL
+    res = fetch.fetch('bandai', src=repo.as_uri(), dest=tmp_path / 'out2')
+    assert res.copied == [chosen]
+    with pytest.raises(MocapError, match='cannot clone'):
+        fetch.fetch('bandai', src=(tmp_path / 'nothing').as_uri(), dest=tmp_path / 'out3')
 
 
 def test_fetch_rejects_unknown_sources(tmp_path):
@@ -438,3 +443,13 @@ def test_fetch_rejects_unknown_sources(tmp_path):
         fetch.fetch('nope', src=str(tmp_path))
     with pytest.raises(MocapError, match='neither'):
         fetch.fetch('bandai', src=str(tmp_path / 'missing'), dest=tmp_path / 'o')
+
+
+def test_fetch_command_exit_status(tmp_path, capsys):
+    src = tmp_path / 'src'
+    _fake_bandai(src, [_bandai_entries()[0].file])
+    assert fetch.main(['bandai', '--from', str(src), '--cache', str(tmp_path / 'c')]) == 1
+    out = capsys.readouterr()
+    assert '1 clips copied' in out.out and 'missing in the source' in out.err
+    assert fetch.main(['bandai', '--from', str(tmp_path / 'none')]) == 2
+    assert 'neither a folder' in capsys.readouterr().err

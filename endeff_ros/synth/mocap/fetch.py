@@ -132,7 +132,7 @@ def open_source(spec: str) -> Iterator[Reader]:
                         return zf.read(cand)
                 raise FileNotFoundError(rel)
             yield read
-    elif re.match(r'^(https?|git|ssh)://|^git@', spec):
+    elif re.match(r'^(https?|git|ssh|file)://|^git@', spec):
         with tempfile.TemporaryDirectory(prefix='mocap-fetch-') as tmp:
             done = subprocess.run(['git', 'clone', '--quiet', '--depth', '1', '--filter=blob:none',
                                    '--no-checkout', spec, tmp], capture_output=True, text=True,
