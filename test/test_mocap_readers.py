@@ -445,11 +445,13 @@ def test_fetch_rejects_unknown_sources(tmp_path):
         fetch.fetch('bandai', src=str(tmp_path / 'missing'), dest=tmp_path / 'o')
 
 
-def test_fetch_command_exit_status(tmp_path, capsys):
+def test_fetch_command_exit_status(tmp_path, capsys, monkeypatch):
     src = tmp_path / 'src'
     _fake_bandai(src, [_bandai_entries()[0].file])
     assert fetch.main(['bandai', '--from', str(src), '--cache', str(tmp_path / 'c')]) == 1
     out = capsys.readouterr()
     assert '1 clips copied' in out.out and 'missing in the source' in out.err
+    monkeypatch.chdir(tmp_path)
     assert fetch.main(['bandai', '--from', str(tmp_path / 'none')]) == 2
     assert 'neither a folder' in capsys.readouterr().err
+    assert not (tmp_path / 'data').exists()   # nothing written for a bad source

@@ -184,8 +184,8 @@ def fetch(source: str, *, src: str | None = None, dest: str | Path | None = None
         msg = f'{source}: catalogue names excluded clips {bad}'
         raise MocapError(msg)
     spec = src or (_default_deepmimic() if source == 'deepmimic' else fs.url)
-    out.dest.mkdir(parents=True, exist_ok=True)
     with open_source(spec) as read:
+        out.dest.mkdir(parents=True, exist_ok=True)
         for name, rel in fs.licences.items():
             try:
                 (out.dest / name).write_bytes(read(rel))
