@@ -219,3 +219,33 @@ def test_find_bags(tmp_path: Path) -> None:
     (tmp_path / 'empty').mkdir()
     with pytest.raises(BagError, match='no rosbag2 bags'):
         find_bags([tmp_path / 'empty'])
+
+
+@pytest.mark.parametrize('storage', STORAGES)
+def test_prefetch_thread_yields_the_same_frames(tmp_path: Path, storage: str) -> None:
+    import threading
+
+    write_bag(tmp_path / 'bag', BagSpec(frames=12, storage=storage, drop_color={4},
+                                        shuffle_log=True))
+    plain, bag = _read(tmp_path / 'bag', ReaderOptions(prefetch=False))
+    ahead, bag2 = _read(tmp_path / 'bag', ReaderOptions(prefetch=True))
+    assert len(plain) == len(ahead) == 12 and bag.stats.to_dict() == bag2.stats.to_dict()
+    for a, b in zip(plain, ahead, strict=True):
+        assert a.frame.stamp_ns == b.frame.stamp_ns and a.log_time_ns == b.log_time_ns
+        np.testing.assert_array_equal(a.frame.depth, b.frame.depth)
+        assert (a.frame.color is None) == (b.frame.color is None)
+        if a.frame.color is not None:
+            np.testing.assert_array_equal(a.frame.color, b.frame.color)
+    # Leaving early stops the thread.
+    with BagReader(tmp_path / 'bag', ReaderOptions(prefetch=True)) as reader:
+        it = reader.records()
+        next(it)
+        assert any(t.name.startswith('bag-reader') for t in threading.enumerate())
+        it.close()
+    assert not any(t.name.startswith('bag-reader') for t in threading.enumerate())
+
+
+def test_prefetch_thread_passes_errors_on(tmp_path: Path) -> None:
+    write_bag(tmp_path / 'bag', BagSpec(frames=3, depth_encoding='8UC1'))
+    with pytest.raises(BagError, match=f"frame at stamp {START_NS} ns.*'8UC1'"):
+        _read(tmp_path / 'bag', ReaderOptions(prefetch=True))

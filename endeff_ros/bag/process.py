@@ -43,7 +43,7 @@ import sys
 import time
 import traceback
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
@@ -69,6 +69,7 @@ from .reader import (
     ReaderOptions,
     add_reader_arguments,
     bag_name,
+    cpus,
     find_bags,
     options_from_args,
     typestore,
@@ -363,11 +364,15 @@ def process_bags(inputs: Sequence[str | Path], output: str | Path, *, jobs: int 
         return [ProcessResult(str(i), '', error=str(err)) for i in inputs]
     if len(inputs) > 1:
         Path(output).mkdir(parents=True, exist_ok=True)
+    workers = max(1, min(jobs or os.cpu_count() or 1, len(inputs)))
+    options = kwargs.get('options') or ReaderOptions()
+    if workers > 1 and options.prefetch is None:
+        # A reader thread per worker only helps while cores are left over.
+        kwargs = {**kwargs, 'options': replace(options, prefetch=workers < cpus())}
     job_list = [(Path(i), o, kwargs) for i, o in zip(inputs, outs, strict=True)]
     enabled = sys.stderr.isatty() if show_progress is None else show_progress
     total = prog.count_frames([j[0] for j in job_list], kwargs.get('options')) \
         if enabled else 0
-    workers = max(1, min(jobs or os.cpu_count() or 1, len(job_list)))
     with prog.progress_bar(total, enabled=enabled) as bar:
         if workers == 1:
             return [_serial_job(j, bar.update) for j in job_list]

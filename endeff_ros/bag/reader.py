@@ -25,7 +25,10 @@ from __future__ import annotations
 import functools
 import heapq
 import itertools
+import os
+import queue
 import sys
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -85,6 +88,10 @@ class ReaderOptions:
     reorder_window_s: float = 1.0
     #: Refuse truncated or corrupt bags instead of reading them up to the last good message.
     strict: bool = False
+    #: Read, deserialise and decode on a background thread, overlapped with the caller's work
+    #: on the frames (file reads, zstd, numpy copies and OpenCV decoding release the GIL).
+    #: None: when this process may run on more than one CPU. Frames are the same either way.
+    prefetch: bool | None = None
 
 
 def add_reader_arguments(parser: argparse.ArgumentParser) -> None:
@@ -476,8 +483,12 @@ class BagReader:
                 stats.dropped[sel.depth] += 1
                 return None
             try:
+                for e in (depth, color):
+                    if e is not None and e.error is not None:
+                        raise e.error
                 frame = convert.frame_from_messages(color.msg if color else None, depth.msg,
-                                                    info)
+                                                    info, depth=depth.image,
+                                                    color=color.image if color else None)
             except InputError as err:
                 problem = f'frame at stamp {depth.stamp} ns (depth {sel.depth}): {err}'
                 raise BagError(self.path, problem) from err
@@ -499,7 +510,12 @@ class BagReader:
                 if rec is not None:
                     yield rec
 
-        for entry in self._ordered(conns, priority):
+        source = self._ordered(conns, priority)
+        prefetch = self.options.prefetch
+        if prefetch or (prefetch is None and cpus() > 1):
+            source = self._prefetched(source, {sel.color: convert.any_color_to_array,
+                                               sel.depth: convert.any_depth_to_array})
+        for entry in source:
             stats.messages[entry.topic] += 1
             i = index[entry.topic]
             if i == 2:
@@ -585,6 +601,54 @@ class BagReader:
             raise BagError(self.path, f'cannot decode a {conn.msgtype} message on {conn.topic} '
                                       f'(corrupt data?): {_why(err)}') from err
 
+    def _prefetched(self, source: Iterator[_Entry], decoders: dict[str, Callable[[Any], Any]],
+                    depth: int = 8) -> Iterator[_Entry]:
+        """``source`` run on a daemon thread, images decoded there, at most ``depth`` ahead.
+
+        Errors of the thread (BagError, storage errors) are raised here, in order; closing
+        this generator (early exit, exception, interrupt) stops the thread and waits for it.
+        """
+        items: queue.Queue[Any] = queue.Queue(maxsize=depth)
+        stop = threading.Event()
+
+        def put(item: Any) -> bool:
+            while not stop.is_set():
+                try:
+                    items.put(item, timeout=0.05)
+                except queue.Full:
+                    continue
+                return True
+            return False
+
+        def work() -> None:
+            try:
+                for entry in source:
+                    decode = decoders.get(entry.topic)
+                    if decode is not None:
+                        try:
+                            entry.image = decode(entry.msg)
+                        except InputError as err:
+                            entry.error = err
+                    if not put(entry):
+                        return
+                put(_END)
+            except BaseException as err:  # noqa: BLE001 - handed to the consumer
+                put(err)
+
+        thread = threading.Thread(target=work, name=f'bag-reader {self.name}', daemon=True)
+        thread.start()
+        try:
+            while True:
+                item = items.get()
+                if item is _END:
+                    return
+                if isinstance(item, BaseException):
+                    raise item
+                yield item
+        finally:
+            stop.set()
+            thread.join()
+
     def _ordered(self, conns: list[Any], priority: dict[str, int]) -> Iterator[_Entry]:
         """Messages of ``conns`` deserialised and re-ordered by header stamp.
 
@@ -609,12 +673,25 @@ class BagReader:
             yield heapq.heappop(heap)[3]
 
 
-@dataclass(frozen=True)
+@dataclass(eq=False)
 class _Entry:
     topic: str
     stamp: int
     log_time: int
     msg: Any
+    image: Any = None  # the image decoded ahead (reader thread), else None
+    error: Exception | None = None  # why decoding ahead failed (raised when the frame is built)
+
+
+_END = object()
+
+
+def cpus() -> int:
+    """CPUs this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
 
 
 def resolve_bag(path: Path) -> Path:

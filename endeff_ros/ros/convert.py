@@ -181,18 +181,24 @@ def camera_info_to_intrinsics(msg: Any) -> Intrinsics:
     return Intrinsics.from_k(np.asarray(k, dtype=np.float64), int(msg.width), int(msg.height))
 
 
-def frame_from_messages(color_msg: Any | None, depth_msg: Any, info_msg: Any) -> RGBDFrame:
+def frame_from_messages(color_msg: Any | None, depth_msg: Any, info_msg: Any, *,
+                        depth: npt.NDArray[np.float32] | None = None,
+                        color: npt.NDArray[np.uint8] | None = None) -> RGBDFrame:
     """One synchronised set -> :class:`RGBDFrame` stamped and framed by the depth header.
 
     Colour and depth may each be ``sensor_msgs/Image`` or ``sensor_msgs/CompressedImage``.
+    ``depth`` / ``color``, when given, are those messages already decoded
+    (:func:`any_depth_to_array`, :func:`any_color_to_array`, e.g. on a reader thread).
     Raises :class:`InputError` for unknown encodings, unusable intrinsics or size mismatches.
     """
     if info_msg is None:
         msg_ = 'no camera info received yet for the depth image'
         raise InputError(msg_)
-    depth = any_depth_to_array(depth_msg)
+    if depth is None:
+        depth = any_depth_to_array(depth_msg)
     intrinsics = camera_info_to_intrinsics(info_msg)
-    color = any_color_to_array(color_msg) if color_msg is not None else None
+    if color is None and color_msg is not None:
+        color = any_color_to_array(color_msg)
     return RGBDFrame(stamp_ns=stamp_to_ns(depth_msg.header.stamp),
                      frame_id=str(depth_msg.header.frame_id), depth=depth,
                      intrinsics=intrinsics, color=color)
