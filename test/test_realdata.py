@@ -76,6 +76,12 @@ def test_lzf_decoder_and_bad_sources(tmp_path: Path) -> None:
     pcd.write_bytes(b'VERSION 0.7\nFIELDS x\nSIZE 4\nTYPE F\nCOUNT 1\nPOINTS 1\nDATA ascii\n0\n')
     with pytest.raises(SourceError, match='ascii'):
         read_pcd(pcd)
+    # Uncompressed binary PCD: points stored as packed records.
+    rec = np.array([(1.5, 7), (-2.0, 9)], dtype=[('x', '<f4'), ('rgba', '<u4')])
+    pcd.write_bytes(b'# comment\nVERSION 0.7\nFIELDS x rgba\nSIZE 4 4\nTYPE F U\nCOUNT 1 1\n'
+                    b'WIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA binary\n' + rec.tobytes())
+    _, fields = read_pcd(pcd)
+    assert fields['x'].tolist() == [1.5, -2.0] and fields['rgba'].tolist() == [7, 9]
 
 
 @pytest.mark.parametrize('name', list(SOURCES))
