@@ -255,3 +255,26 @@ def test_cloud_typestore_matches_jazzy() -> None:
     assert small.generate_msgdef(CLOUD_TYPE, ros_version=2) == jazzy.generate_msgdef(
         CLOUD_TYPE, ros_version=2)
     assert small.hash_rihs01(CLOUD_TYPE) == jazzy.hash_rihs01(CLOUD_TYPE)
+
+
+def test_cloud_cdr_equals_the_node_cloud() -> None:
+    """The cloud process writes (rosbags) is the node's cloud message (rclpy), field by field."""
+    from endeff_ros.bag.process import CLOUD_TYPE, cloud_cdr, cloud_typestore
+    from endeff_ros.core.types import Track
+
+    rng = np.random.default_rng(3)
+    ts = cloud_typestore()
+    for n in (0, 1, 5):
+        tracks = [Track(id=int(i), entity=i % 2, position=rng.normal(size=3), geodesic=0.4 + i,
+                        confidence=0.8, state=i % 2, age=3, path=np.zeros((2, 3)))
+                  for i in range(n)]
+        stamp = 1_700_000_000_123_456_789 + n
+        ours = ts.deserialize_cdr(cloud_cdr(stamp, 'cam_optical', tracks), CLOUD_TYPE)
+        node = ts.deserialize_cdr(convert.serialize(convert.tracks_to_cloud(
+            convert.make_header(stamp, 'cam_optical'), tracks)), CLOUD_TYPE)
+        assert ours.header == node.header
+        assert [(f.name, f.offset, f.datatype, f.count) for f in ours.fields] == [
+            (f.name, f.offset, f.datatype, f.count) for f in node.fields]
+        for key in ('height', 'width', 'is_bigendian', 'point_step', 'row_step', 'is_dense'):
+            assert getattr(ours, key) == getattr(node, key), key
+        assert ours.data.tobytes() == node.data.tobytes()
