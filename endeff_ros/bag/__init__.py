@@ -1,7 +1,10 @@
-"""Offline rosbag2 tools: reading benchmark bags, ``endeff process``, throughput benchmark.
+"""Offline rosbag2 tools: reading benchmark bags and recordings, ``endeff process``.
 
-- ``reader``         open a bag (sqlite3 or mcap), pick topics, synchronise, yield frames
-- ``process``        ``endeff process``: run the tracker on bags, write result bags
-- ``bench_process``  frames/s of ``endeff process`` on one core and on N processes
-- ``errors``         :class:`~endeff_ros.bag.errors.BagError`, the one error of this package
+- ``reader``    open a bag (sqlite3 or mcap), pick raw or compressed topics, synchronise,
+                yield frames
+- ``salvage``   read a bag whose index is gone (a file cut short) message by message
+- ``process``   ``endeff process``: run the tracker on bags, write result bags
+- ``outputs``   output paths checked before any work, written aside, never clobbered
+- ``progress``  optional tqdm progress bar, shared frame counter for worker processes
+- ``errors``    :class:`~endeff_ros.bag.errors.BagError`, the one error of this package
 """
