@@ -150,3 +150,10 @@ def test_looped_cycles_are_long_and_smooth(committed):
     assert abs(walk[-1, J['pelvis'], 0]) < 0.15 * walk[-1, J['pelvis'], 2]
     assert sum(lc.duration_s > c.duration_s for c, lc in
                zip(committed, looped.values(), strict=True)) >= 6
+
+
+def test_clips_are_cached_and_read_only(committed):
+    again = catalogue.load_clips(committed_only=True)
+    assert again[0] is committed[0]
+    with pytest.raises(ValueError):
+        committed[0].positions[0, 0, 0] = 1.0

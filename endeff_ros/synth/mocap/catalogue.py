@@ -14,6 +14,7 @@ statistics (clips and minutes per source, family and split).
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 from collections.abc import Callable, Collection
@@ -374,14 +375,24 @@ def entry_path(entry: Entry, cache_dir: str | Path | None = None) -> Path:
 def load_clip(entry: Entry, cache_dir: str | Path | None = None, *,
               loop_s: float | None = None) -> MotionClip:
     """One catalogue entry as a ``MotionClip`` (30 Hz, body frame); ``loop_s`` see
-    ``load_clips``."""
-    src = SOURCES[entry.source]
+    ``load_clips``. Clips are kept in memory per file (a suite run asks for the same clips
+    many times); their ``positions`` are read-only for that reason."""
     path = entry_path(entry, cache_dir)
     if not path.is_file():
         msg = f'clip {entry.name}: file {path} is missing'
         raise MocapError(msg)
-    return MotionClip(entry.name, entry.source, entry.family, entry.split, FPS,
-                      src.load(path, entry, loop_s), src.licence)
+    stat = path.stat()
+    return _load(entry, str(path.resolve()), stat.st_mtime_ns, stat.st_size, loop_s)
+
+
+@functools.lru_cache(maxsize=512)
+def _load(entry: Entry, path: str, _mtime_ns: int, _size: int,
+          loop_s: float | None) -> MotionClip:
+    src = SOURCES[entry.source]
+    pos = src.load(Path(path), entry, loop_s)
+    pos.flags.writeable = False
+    return MotionClip(entry.name, entry.source, entry.family, entry.split, FPS, pos,
+                      src.licence)
 
 
 def load_clips(*, cache_dir: str | Path | None = None, committed_only: bool = False,
