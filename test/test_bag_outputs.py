@@ -185,3 +185,24 @@ def test_interrupt_leaves_nothing(tmp_path: Path, sig: int, status: int, jobs: i
     assert 'interrupted' in err and 'Traceback' not in err
     assert _leftovers(tmp_path) == []
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_sigkill_leftover_is_removed_by_the_next_run(tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    import endeff_ros.core.tracker as tracker_mod
+
+    src = tmp_path / 'in'
+    write_bag(src, BagSpec(frames=120, width=32, height=24, fx=10.0, blob_px=1))
+    out = tmp_path / 'out'
+    code = _SLOW_RUN.format(test_dir=str(TEST_DIR))
+    proc = subprocess.Popen([sys.executable, '-c', code, 'process', str(src), '-o', str(out)],
+                            stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while not _leftovers(tmp_path) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.kill()
+    proc.wait(timeout=30)
+    assert len(_leftovers(tmp_path)) == 1 and not out.exists()  # SIGKILL cannot clean up
+    monkeypatch.setattr(tracker_mod, 'Tracker', FakeTracker)
+    assert cli_main(['process', str(src), '-o', str(out)]) == 0
+    assert _leftovers(tmp_path) == [] and (out / 'metadata.yaml').is_file()
