@@ -80,8 +80,9 @@ def parse_format(fmt: str) -> CompressedFormat:
     raise InputError(msg)
 
 
-def _buffer(data: Any) -> npt.NDArray[np.uint8]:
-    """The ``data`` field as a flat uint8 array (no copy for bytes, arrays, array.array)."""
+def as_uint8(data: Any) -> npt.NDArray[np.uint8]:
+    """A message's ``data`` field as a flat uint8 array (no copy for numpy arrays from
+    rosbags, ``bytes`` and ``array.array`` from rclpy)."""
     if isinstance(data, np.ndarray):
         return data.reshape(-1).view(np.uint8)
     try:
@@ -121,7 +122,7 @@ def decode_color(fmt: str, data: Any) -> npt.NDArray[np.uint8]:
         msg = (f'unsupported compressed colour encoding {parsed.encoding!r} in {fmt!r} '
                f'(expected one of {", ".join(_COLOR_ENCODINGS)})')
         raise InputError(msg)
-    img = _imdecode(_buffer(data), fmt)
+    img = _imdecode(as_uint8(data), fmt)
     if img.dtype != np.uint8:
         msg = f'compressed colour image ({fmt!r}) decodes to {img.dtype}, expected 8 bit'
         raise InputError(msg)
@@ -140,7 +141,7 @@ def decode_depth_raw(fmt: str, data: Any) -> npt.NDArray[Any]:
     metres with NaN where nothing was stored.
     """
     parsed = parse_format(fmt)
-    buf = _buffer(data)
+    buf = as_uint8(data)
     if parsed.codec == 'compressedDepth rvl':
         msg = f'compressedDepth RVL ({fmt!r}) is not supported; record with png'
         raise InputError(msg)

@@ -76,14 +76,7 @@ def ns_to_sec_nanosec(stamp_ns: int) -> tuple[int, int]:
     return sec, nanosec
 
 
-def _raw_bytes(data: Any) -> npt.NDArray[np.uint8]:
-    """The ``data`` field of a message as a flat uint8 array (no copy where possible)."""
-    if isinstance(data, np.ndarray):
-        return data.reshape(-1).view(np.uint8)
-    try:
-        return np.frombuffer(memoryview(data), dtype=np.uint8)
-    except TypeError:
-        return np.asarray(data, dtype=np.uint8).reshape(-1)
+_raw_bytes = image_codecs.as_uint8
 
 
 def _image_pixels(msg: Any, base: str, channels: int) -> npt.NDArray[Any]:
