@@ -185,3 +185,33 @@ def test_corrupt_compressed_frame_names_bag_and_stamp(tmp_path: Path) -> None:
         writer.write(c_c, START_NS + 2, TS.serialize_cdr(col, COMPRESSED))
     with pytest.raises(BagError, match=f'frame at stamp {START_NS} ns.*cannot decode'):
         _read(path)
+
+
+def test_process_and_eval_read_compressed_bags(tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """``endeff process`` on a compressed recording gives the clouds of its raw twin."""
+    pytest.importorskip('rclpy')
+    from bag_helpers import FakeTracker, fake_estimate_frame, write_bag
+    from rosbags.highlevel import AnyReader
+
+    import endeff_ros.core.tracker as tracker_mod
+    from endeff_ros.cli import main as cli_main
+    from endeff_ros.evaluate import evaluate_bag
+
+    monkeypatch.setattr(tracker_mod, 'Tracker', FakeTracker)
+    spec = BagSpec(frames=4)
+    write_compressed_bag(tmp_path / 'packed', spec)  # PNG colour, compressedDepth 16UC1
+    write_bag(tmp_path / 'raw', spec)
+    clouds = {}
+    for name in ('packed', 'raw'):
+        out = tmp_path / f'{name}_out'
+        assert cli_main(['process', str(tmp_path / name), '-o', str(out)]) == 0
+        with AnyReader([out]) as r:
+            clouds[name] = [convert.xyz(convert.cloud_to_array(r.deserialize(raw, c.msgtype)))
+                            for c, _, raw in r.messages()]
+    assert len(clouds['packed']) == 4
+    for a, b in zip(clouds['packed'], clouds['raw'], strict=True):
+        np.testing.assert_array_equal(a, b)
+    res = evaluate_bag(tmp_path / 'packed', estimate_fn=fake_estimate_frame,
+                       tracker_factory=FakeTracker)
+    assert res.scored_frames == 4 and res.score('temporal').recall == 1.0
