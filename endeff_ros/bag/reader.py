@@ -17,7 +17,13 @@ and ``<topic>/compressedDepth`` or ``<topic>/compressed`` (depth) of type
 
 Ground truth is matched to a frame by exact equality of its ``header.stamp`` with the depth
 image's (the contract). A depth image that finds no colour partner within the slop is still
-yielded, with ``color=None`` (the tracker falls back to predicting without optical flow).
+yielded, with ``color=None`` (the tracker falls back to predicting without optical flow): the
+synchroniser reports each message it drops (``on_drop``) and the reader yields those depth
+images as it learns of them.
+
+A bag cut short is read up to its last readable message (:mod:`endeff_ros.bag.salvage` when
+the index is gone) with a warning naming what was lost; ``strict`` refuses it. Reading,
+deserialising and decoding run on a background thread ahead of the caller (``prefetch``).
 """
 
 from __future__ import annotations
