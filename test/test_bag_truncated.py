@@ -101,3 +101,18 @@ def test_process_truncated_bag_and_folder_without_metadata(
     assert 5 <= n < FRAMES
     assert cli_main(['process', str(bag), '-o', str(tmp_path / 'strict'), '--strict']) == 1
     assert '--strict' in capsys.readouterr().err and not (tmp_path / 'strict').exists()
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_copy_input_of_a_truncated_bag(tmp_path: Path, storage: str) -> None:
+    pytest.importorskip('rclpy')
+    from rosbags.highlevel import AnyReader
+
+    from endeff_ros.bag.process import process_bag
+
+    bag = _cut_bag(tmp_path, storage)
+    res = process_bag(bag, tmp_path / 'out', copy_input=True, tracker_factory=FakeTracker)
+    with AnyReader([tmp_path / 'out']) as r:
+        topics = [c.topic for c, _, _ in r.messages()]
+    assert topics.count('/camera/end_effectors') == res.frames
+    assert res.frames <= topics.count(DEPTH) < FRAMES
