@@ -486,3 +486,59 @@ def test_bad_image_transport_is_refused(ros_context):
     with pytest.raises(ParameterError, match='image_transport'):
         EndeffNode(tracker_factory=FakeTracker, namespace='/bad_transport',
                    parameter_overrides=[Parameter('image_transport', value='theora')])
+
+
+def test_lost_colour_images_do_not_cost_depth_frames(harness):
+    """1 colour image in 4 lost: every depth image still gets its cloud, without waiting
+    for color_timeout (a newer colour image shows the loss)."""
+    h = harness(color_timeout=10.0)  # longer than wait_clouds waits: the timeout cannot help
+    stamps = [13_000_000_000 + k * 33_333_333 for k in range(8)]
+    for k, stamp in enumerate(stamps):
+        lost = k % 4 == 1
+        h.send(stamp, color=not lost, info=k == 0)
+        # A frame with colour is answered at once (after the lost one before it, if any); a
+        # frame whose colour is lost when the next colour image arrives.
+        assert h.wait_clouds(k if lost else k + 1), (k, h.node.snapshot())
+    got = [convert.stamp_to_ns(c.header.stamp) for c in h.clouds]
+    assert got == stamps[:len(got)] and len(got) >= 7, (got, h.node.snapshot())
+    assert h.node.stats.colorless == 2 and h.node.stats.warnings.get('color_lost') == 2
+
+
+def test_one_stamp_far_ahead_does_not_reset(harness):
+    h = harness()
+    h.send(14_000_000_000)
+    assert h.wait_clouds(1)
+    h.send(14_000_000_000 + 86_400 * 10**9, info=False)  # one set stamped a day ahead
+    h.send(14_033_333_333, info=False)
+    assert h.wait_clouds(2)
+    assert h.tracker.resets == 0 and h.node.stats.quarantined >= 1
+    assert 'stamp_ahead' in h.node.stats.warnings
+    assert convert.stamp_to_ns(h.clouds[1].header.stamp) == 14_033_333_333
+
+
+def test_tiny_image_is_bad_input_and_keeps_the_tracks(harness):
+    h = harness()
+    h.send(15_000_000_000)
+    assert h.wait_clouds(1)
+    frames = len(h.tracker.frames)
+    h.pub['info'].publish(info_msg(15_033_333_333, FRAME_ID, 1, 1))
+    h.pub['depth'].publish(image_msg(np.full((1, 1), 1500, np.uint16), '16UC1',
+                                     15_033_333_333, FRAME_ID))
+    h.pub['color'].publish(image_msg(np.zeros((1, 1, 3), np.uint8), 'rgb8', 15_033_333_333,
+                                     'color_frame'))
+    assert spin_until(h.executor, lambda: h.node.stats.bad_input == 1)
+    assert len(h.tracker.frames) == frames  # the tracker never saw it
+    assert 'too small' in h.node.stats.last_warning
+
+
+def test_empty_frame_id_is_warned_about(harness):
+    h = harness()
+    count = h.node.stats.received['camera_info']
+    h.pub['info'].publish(info_msg(16_000_000_000, '', W, H))
+    assert spin_until(h.executor, lambda: h.node.stats.received['camera_info'] > count)
+    mm = np.full((H, W), 3800, np.uint16)
+    mm[5, 7] = 1500
+    h.pub['color'].publish(image_msg(np.zeros((H, W, 3), np.uint8), 'rgb8', 16_000_000_000, ''))
+    h.pub['depth'].publish(image_msg(mm, '16UC1', 16_000_000_000, ''))
+    assert h.wait_clouds(1)
+    assert h.node.stats.warnings.get('empty_frame_id') == 1 and h.clouds[0].header.frame_id == ''

@@ -55,6 +55,8 @@ def test_early_work_while_a_partner_is_awaited() -> None:
     info = feed(s, 'camera_info', 0)
     depth = feed(s, 'depth', 100)
     assert drain(s) == [('prepare', (depth, info))]  # Sections 3-4 need no colour
+    color = feed(s, 'color', 101)
+    assert [j for j, _ in drain(s)] == ['process']
     color = feed(s, 'color', 133)
     assert drain(s) == [('prepare_flow', (color, info))]  # the flow needs no depth
     # A colour image whose flow the caller computed alongside gets no early-flow job.
@@ -210,3 +212,70 @@ def test_received_counts_every_input(kind: str) -> None:
     for k in range(4):
         feed(s, kind, 100 + 33 * k)
     assert s.stats.received[kind] == 4
+
+
+def _stream(s: Scheduler, frames: int, *, drop_color=(), color=True, t0=1000.0,
+            period=33.3) -> list[int]:
+    """Feed ``frames`` depth images (and colour 2 ms later, except ``drop_color`` frames);
+    returns the depth stamps (ns) of the sets the worker processed, in order."""
+    done = []
+    for k in range(frames):
+        stamp = t0 + k * period
+        feed(s, 'depth', stamp, receipt=k * period / 1e3)
+        if color and k not in drop_color:
+            feed(s, 'color', stamp + 2, receipt=k * period / 1e3 + 0.002)
+        s.flush_colorless(k * period / 1e3 + 0.003)
+        done += [args[0]['depth'].stamp for job, args in drain(s) if job == 'process']
+    return done
+
+
+def test_every_depth_image_is_answered_when_colour_images_are_lost() -> None:
+    """A depth image whose colour never comes is handed on as soon as a newer colour image
+    shows that it is lost, and its set does not replace the next complete set."""
+    warnings: list[str] = []
+    s = make(color_timeout_s=10.0, on_warning=lambda kind, text: warnings.append(kind))
+    feed(s, 'camera_info', 0)
+    done = _stream(s, 30, drop_color={3, 13, 23})
+    assert done[:29] == [round((1000.0 + k * 33.3) * MS) for k in range(29)]
+    assert s.stats.colorless == 3 and s.skipped == 0
+    assert warnings.count('color_lost') == 3
+
+
+def test_without_colour_depth_images_do_not_wait_for_the_timeout() -> None:
+    s = make(color_timeout_s=10.0)
+    feed(s, 'camera_info', 0)
+    done = _stream(s, 10, color=False)
+    # The first few wait (colour may still come); after that each is answered on arrival.
+    from endeff_ros.ros.scheduler import COLOR_STOPPED_FRAMES
+
+    assert done == [round((1000.0 + k * 33.3) * MS) for k in range(COLOR_STOPPED_FRAMES, 10)]
+
+
+def test_one_stamp_far_ahead_is_quarantined_and_resets_nothing() -> None:
+    warnings: list[str] = []
+    s = make(jump_threshold_ns=1000 * MS, on_warning=lambda kind, text: warnings.append(kind))
+    feed(s, 'camera_info', 0)
+    first = _stream(s, 3)
+    feed(s, 'depth', 1000.0 + 86_400_000)  # one frame stamped a day ahead
+    assert s.stats.quarantined == 1 and warnings == ['stamp_ahead']
+    later = _stream(s, 3, t0=1000.0 + 3 * 33.3)
+    assert s.begin_set() == (None, False)  # no reset
+    assert len(first) == 3 and len(later) == 3 and later[0] > first[-1]
+
+
+def test_a_confirmed_jump_ahead_is_followed() -> None:
+    s = make(jump_threshold_ns=1000 * MS)
+    feed(s, 'camera_info', 0)
+    _stream(s, 3)
+    done = _stream(s, 3, t0=60_000.0)  # a new recording a minute later
+    assert s.stats.quarantined == 2  # the first frame of the jump (colour and depth)
+    assert len(done) >= 2 and s.begin_set() == (None, False)
+
+
+def test_late_messages_are_dropped_with_a_warning() -> None:
+    warnings: list[str] = []
+    s = make(on_warning=lambda kind, text: warnings.append(kind))
+    feed(s, 'camera_info', 0)
+    _stream(s, 3)
+    feed(s, 'depth', 1000.0)  # older than the last set handed on, within the jump threshold
+    assert 'late_input' in warnings

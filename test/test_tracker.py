@@ -376,15 +376,20 @@ def test_track_state_age_confidence():
     assert all(b < a for a, b in zip(confs, confs[1:])), confs
 
 
-def test_reset_clears_tracks():
+@pytest.mark.parametrize('forget_ids', [False, True])
+def test_reset_clears_tracks(forget_ids):
     shots = star_limb_vanishes(3, 7)
     tracker = Tracker(EndeffParams(keep_frames=4))
     for s in shots[:3]:
-        tracker.update(s.frame)
-    tracker.reset()
+        used = {t.id for t in tracker.update(s.frame).tracks}
+    tracker.reset(forget_ids=forget_ids)
     again = tracker.update(shots[3].frame)
     fresh = Tracker(EndeffParams(keep_frames=4)).update(shots[3].frame)
-    assert [t.id for t in again.tracks] == [t.id for t in fresh.tracks] == [0, 1, 2, 3]
+    assert [t.id for t in fresh.tracks] == [0, 1, 2, 3]
+    if forget_ids:
+        assert [t.id for t in again.tracks] == [0, 1, 2, 3]
+    else:  # ids are never reused after a reset
+        assert len(again.tracks) == 4 and not used & {t.id for t in again.tracks}
     assert all(t.age == 1 and t.state == Track.DETECTED for t in again.tracks)
     np.testing.assert_allclose(again.positions(), fresh.positions())
 

@@ -111,12 +111,15 @@ class Tracker:
     def __init__(self, params: EndeffParams | None = None) -> None:
         self.params = params or EndeffParams()
         self._flow: FlowEstimator | None = None
-        self.reset()
+        self.reset(forget_ids=True)
 
-    def reset(self) -> None:
-        """Forget all tracks (e.g. when time jumps backwards during bag replay)."""
+    def reset(self, *, forget_ids: bool = False) -> None:
+        """Forget all tracks (e.g. when time jumps backwards during bag replay). New tracks
+        get ids never used before, so that a subscriber never confuses an old end-effector with
+        a new one; ``forget_ids`` starts them at 0 again (a fresh tracker, a warm-up)."""
         self._tracks: list[_TrackState] = []
-        self._next_id = 0
+        if forget_ids or not hasattr(self, '_next_id'):
+            self._next_id = 0
         self._prev: RGBDFrame | None = None
         self._floor: FloorPlane | None = None
 

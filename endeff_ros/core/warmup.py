@@ -49,5 +49,5 @@ def warm_up(tracker: Tracker, intrinsics: Intrinsics = KINECT_640) -> int:
         for frame in warm_up_frames(intrinsics):
             result = tracker.update(frame)
     finally:
-        tracker.reset()
+        tracker.reset(forget_ids=True)
     return len(result.tracks)

@@ -61,6 +61,8 @@ _TOPICS = {'color': 'color/image_raw', 'depth': 'depth/image_raw',
            'camera_info': 'depth/camera_info'}
 #: image_transport's compressed topics of the image inputs (``compressed``, ``compressedDepth``).
 _COMPRESSED = {'color': 'color/image_raw/compressed', 'depth': 'depth/image_raw/compressedDepth'}
+#: Smaller images cannot hold a scene: skipped as bad input instead of emptying the tracks.
+MIN_IMAGE_SIDE = 8
 #: How often ``image_transport: auto`` looks for publishers until an image input has a message.
 _AUTO_PERIOD_S = 0.5
 
@@ -100,7 +102,7 @@ class EndeffNode(Node):
             use_color=self._p('use_color'), queue_size=self._p('sync_queue_size'),
             slop_ns=round(self._p('sync_slop') * 1e9), color_timeout_s=self._p('color_timeout'),
             jump_threshold_ns=round(self._p('time_jump_threshold') * 1e9), stamp_of=_stamp,
-            stats=self.stats, on_event=self.get_logger().info)
+            stats=self.stats, on_event=self.get_logger().info, on_warning=self._warn)
         # Keeps tracker state reads (flow) apart from tracker updates; ``_updates`` counts the
         # updates, so that an early flow computed before the latest one is not used.
         self._tracker_lock = threading.Lock()
@@ -146,6 +148,11 @@ class EndeffNode(Node):
     # ---------------------------------------------------------------- parameters and inputs
     def _p(self, name: str) -> Any:
         return self.get_parameter(name).value
+
+    def _warn(self, kind: str, text: str) -> None:
+        """A problem with the input: counted per kind and logged at most every 5 s."""
+        self.stats.warn(kind, text)
+        self.get_logger().warning(text, throttle_duration_sec=5)
 
     def _subscribe(self, kind: str, *, compressed: bool) -> Any:
         if kind == 'camera_info':
@@ -302,12 +309,17 @@ class EndeffNode(Node):
         early, early_flow = self.scheduler.take_early(msgs, self.tracker.params, self._updates)
         try:
             frame = _frame(msgs, early, early_flow)
+            if min(frame.depth.shape) < MIN_IMAGE_SIDE:
+                msg = (f'depth image {frame.depth.shape[1]}x{frame.depth.shape[0]} is too small '
+                       f'to hold a scene (tracks kept)')
+                raise InputError(msg)
         except InputError as exc:
             self.stats.bad_input += 1
-            text = f'skipping input frame: {exc}'
-            self.stats.warn('bad_input', text)
-            self.get_logger().warning(text, throttle_duration_sec=5)
+            self._warn('bad_input', f'skipping input frame: {exc}')
             return
+        if not header.frame_id:
+            self._warn('empty_frame_id', 'depth image has an empty frame_id: the outputs carry '
+                       "it as it is (set the driver's frame_id)")
         try:
             if not np.isfinite(frame.depth).any():
                 msg = f'depth image {frame.stamp_ns} ns has no valid reading (all 0 or NaN)'

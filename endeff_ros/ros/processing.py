@@ -194,6 +194,7 @@ class NodeStats:
     #: Sections 3-4 of their depth partner
     flow_alongside: int = 0
     colorless: int = 0
+    quarantined: int = 0  # messages stamped far ahead of the stream, dropped
     duplicates: int = 0
     published_empty: int = 0
     bad_input: int = 0
@@ -217,6 +218,7 @@ class NodeStats:
             'prepared': self.prepared, 'prepared_flow': self.prepared_flow,
             'flow_alongside': self.flow_alongside,
             'colorless': self.colorless, 'duplicates': self.duplicates,
+            'quarantined': self.quarantined,
             'skipped': skipped, 'dropped_unpaired': dict(dropped),
             'published_empty': self.published_empty, 'bad_input': self.bad_input,
             'errors': self.errors, 'resets': self.resets, 'warnings': dict(self.warnings),

@@ -12,11 +12,19 @@ tested by feeding stamped messages (as the synchroniser is), with no DDS:
   depth partner, it may compute the optical flow (``prepare_flow`` jobs: they need no depth).
   A result made early (:class:`Early`) serves only the set it was made for, with the parameters
   it was made with, and only if the tracker did not change in between.
-- **Colourless frames.** A depth image still without colour after ``color_timeout`` is handed
-  on alone (as the offline bag reader does).
+- **Every depth image answered.** A depth image still without colour after ``color_timeout``
+  is handed on alone (as the offline bag reader does); sooner when its colour is known to be
+  lost: a newer colour image has arrived (colour stamps only grow, so it can no longer pair),
+  or the colour stream has stopped (``COLOR_STOPPED_FRAMES`` depth images in a row without
+  any colour), so that with no colour at all no frame waits. Such a set goes into a slot of
+  its own that the worker serves before the newest complete set, so that neither replaces
+  the other.
 - **Order and resets.** A set whose depth is not newer than one already handed on is a
   duplicate. Stamps going back by more than the jump threshold (a bag replayed in a loop), or
-  the ROS clock jumping back, reset the tracker and the synchroniser.
+  the ROS clock jumping back, reset the tracker and the synchroniser. A single stamp more
+  than the threshold *ahead* of the stream is quarantined (dropped with a warning) unless the
+  next one confirms the jump, so that one bad stamp cannot reset the tracks. Messages older
+  than the last set handed on are dropped by the synchroniser, with a warning.
 
 Messages are opaque here: the caller passes ``stamp_of(msg) -> int`` (ns). Thread safety: every
 public method may be called from any thread; the worker calls :meth:`next_job`.
@@ -36,8 +44,19 @@ from endeff_ros.sync import ApproximateTimeSynchronizer
 #: Seconds without camera info while depth images arrive before the node warns.
 CAMERA_INFO_GRACE_S = 0.5
 
-#: Job names returned by :meth:`Scheduler.next_job`, in the order the worker prefers them.
-JOBS = ('process', 'prepare', 'prepare_flow')
+#: Depth images in a row without any colour image after which colour counts as stopped.
+COLOR_STOPPED_FRAMES = 3
+
+_COLORLESS_WHY = {
+    'lost': 'a colour image was lost: its depth image is processed without colour',
+    'late': 'a colour image did not arrive within color_timeout: its depth image is processed '
+            'without colour',
+    'stopped': 'no colour images are arriving: depth images are processed without colour',
+}
+
+#: Job names of the scheduler's slots (:meth:`Scheduler.next_job`), in the order the worker
+#: prefers them: sets whose colour was lost (older), the newest complete set, early work.
+JOBS = ('process', 'process', 'prepare', 'prepare_flow')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,14 +79,16 @@ class Scheduler:
     ``use_color``: synchronise colour too (else depth and camera info only). ``queue_size`` and
     ``slop_ns``: the synchroniser's. ``color_timeout_s``: how long a depth image waits for its
     colour. ``jump_threshold_ns``: stamps going back by more reset. ``stats``: the node's
-    counters (``received``, ``duplicates``, ``colorless``). ``on_event(text)``: informational
-    messages (the node logs them).
+    counters (``received``, ``duplicates``, ``colorless``, warnings). ``on_event(text)``:
+    informational messages; ``on_warning(kind, text)``: problems with the input (the node logs
+    them, rate-limited per kind).
     """
 
     def __init__(self, *, use_color: bool, queue_size: int, slop_ns: int,
                  color_timeout_s: float, jump_threshold_ns: int,
                  stamp_of: Callable[[Any], int], stats: NodeStats | None = None,
-                 on_event: Callable[[str], None] | None = None) -> None:
+                 on_event: Callable[[str], None] | None = None,
+                 on_warning: Callable[[str, str], None] | None = None) -> None:
         self.inputs = ['color', 'depth', 'camera_info'] if use_color else ['depth',
                                                                             'camera_info']
         self.stats = stats or NodeStats()
@@ -75,8 +96,11 @@ class Scheduler:
         self.jump_threshold_ns = int(jump_threshold_ns)
         self._stamp_of = stamp_of
         self._on_event = on_event or (lambda text: None)
+        self._on_warning = on_warning or (lambda kind, text: None)
         self._lock = threading.Lock()
         self._slot: LatestSlot[tuple[dict[str, Any], float]] = LatestSlot()
+        # Sets whose colour image is known to be lost (served before the newest set).
+        self._lost: LatestSlot[tuple[dict[str, Any], float]] = self._slot.companion()
         # Depth images (with the camera info) waiting for the early Sections 3-4, colour images
         # waiting for the early flow; the last early result of each.
         self._early: LatestSlot[tuple[Any, Any]] = self._slot.companion()
@@ -88,6 +112,10 @@ class Scheduler:
         self._last_info: Any = None
         self._first_unpaired_depth: float | None = None
         self._newest_ns: int | None = None
+        # Quarantined stamps far ahead of the stream, per input: a jump is followed when the
+        # next image of the same input confirms it (one bad frame stamps colour and depth).
+        self._ahead: dict[str, int] = {}
+        self._depth_since_color = 0  # depth images received since the last colour image
         self._reset_pending = False
         self._params_pending: EndeffParams | None = None
         self._waiting: dict[int, tuple[Any, float]] = {}  # depth stamp -> (msg, receipt)
@@ -99,7 +127,8 @@ class Scheduler:
     # ------------------------------------------------------------------ synchroniser
     def _make_sync(self) -> ApproximateTimeSynchronizer:
         sync = ApproximateTimeSynchronizer(len(self.inputs), self._queue_size, self._slop_ns,
-                                           latched=(self.inputs.index('camera_info'),))
+                                           latched=(self.inputs.index('camera_info'),),
+                                           on_drop=self._on_sync_drop)
         if self._last_info is not None:
             sync.add(self.inputs.index('camera_info'), 0, self._last_info)
         return sync
@@ -109,6 +138,14 @@ class Scheduler:
         for i, kind in enumerate(self.inputs):
             self._dropped_before[kind] += self._sync.stats.dropped[i]
         self._sync = self._make_sync()
+
+    def _on_sync_drop(self, index: int, stamp_ns: int, msg: Any, reason: str) -> None:
+        """A message the synchroniser dropped (lock held): late ones are worth a warning (the
+        others are the normal unpaired leftovers, counted in ``dropped``)."""
+        if reason == 'late':
+            kind = self.inputs[index]
+            self._on_warning('late_input', f'{kind} image stamped {stamp_ns / 1e9:.3f} s is not '
+                             f'newer than the last set handed on: dropped')
 
     def resync(self, queue_size: int, slop_ns: int) -> None:
         """Use a synchroniser with a new queue size and slop (pending messages are dropped)."""
@@ -129,46 +166,92 @@ class Scheduler:
 
     @property
     def skipped(self) -> int:
-        """Complete sets replaced in the slot before the worker took them."""
-        return self._slot.skipped
+        """Sets replaced in their slot before the worker took them."""
+        return self._slot.skipped + self._lost.skipped
 
     @property
     def sets(self) -> int:
-        """Complete sets handed to the worker's slot."""
-        return self._slot.put_count
+        """Sets handed to the worker."""
+        return self._slot.put_count + self._lost.put_count
 
     # ------------------------------------------------------------------ inputs
     def on_input(self, kind: str, msg: Any, receipt: float, *, flow_done: bool = False) -> None:
         """Take one message of input ``kind`` received at ``receipt`` (monotonic s).
         ``flow_done``: a colour image whose flow the caller already computed (no early flow)."""
         stamp = self._stamp_of(msg)
+        lost = None
         with self._lock:
             self.stats.received[kind] += 1
             if kind == 'camera_info':
                 self._last_info = msg
                 self._first_unpaired_depth = None
-            elif (self._newest_ns is not None
-                  and stamp < self._newest_ns - self.jump_threshold_ns):
-                self._on_event(f'input stamps jumped back by '
-                               f'{(self._newest_ns - stamp) / 1e9:.3f} s: resetting')
-                self._request_reset()
-                self._newest_ns = stamp
-            else:
-                self._newest_ns = max(stamp, self._newest_ns or stamp)
+            elif not self._check_stamp(kind, stamp):
+                return
             if kind == 'depth' and self._first_unpaired_depth is None:
                 self._first_unpaired_depth = receipt
+            if kind == 'color':
+                self._depth_since_color = 0
+                # Depth images that can no longer pair with any colour image lost theirs.
+                lost = self._hand_on_colorless(
+                    [s for s in self._waiting if s < stamp - self._slop_ns], 'lost')
             if kind == 'depth' and 'color' in self.inputs:
+                self._depth_since_color += 1
                 self._waiting[stamp] = (msg, receipt)
-                if self._last_info is not None:
+                if self._depth_since_color > COLOR_STOPPED_FRAMES:
+                    lost = self._hand_on_colorless([stamp], 'stopped')
+                elif self._last_info is not None:
                     self._early.put((msg, self._last_info))
             ready = [self._claim(dict(zip(self.inputs, found)))
                      for found in self._sync.add(self.inputs.index(kind), stamp, msg)]
             if (kind == 'color' and not ready and not flow_done
                     and self._last_info is not None):
                 self._early_color.put((msg, self._last_info))
+        if lost is not None:
+            self._lost.put(lost)
         for msgs in ready:
             if msgs is not None:
                 self._slot.put((msgs, receipt))
+
+    def _check_stamp(self, kind: str, stamp: int) -> bool:
+        """Follow the stream's newest stamp (lock held): a jump back resets; a single stamp
+        far ahead is quarantined (False: drop the message) until a second one confirms it."""
+        newest, limit = self._newest_ns, self.jump_threshold_ns
+        if newest is not None and stamp < newest - limit:
+            self._on_event(f'input stamps jumped back by {(newest - stamp) / 1e9:.3f} s: '
+                           f'resetting')
+            self._request_reset()
+            self._newest_ns = stamp
+            self._ahead.clear()
+            return True
+        if newest is not None and stamp > newest + limit:
+            seen = self._ahead.get(kind)
+            if seen is None or not seen < stamp <= seen + limit:
+                self._ahead[kind] = stamp
+                self.stats.quarantined += 1
+                self._on_warning('stamp_ahead', f'{kind} image stamped {stamp / 1e9:.3f} s, '
+                                 f'{(stamp - newest) / 1e9:.3f} s ahead of the stream: '
+                                 f'ignored unless the next stamps follow it')
+                return False
+            self._on_event(f'input stamps jumped ahead by {(stamp - newest) / 1e9:.3f} s')
+        self._ahead.clear()
+        self._newest_ns = max(stamp, newest or stamp)
+        return True
+
+    def _hand_on_colorless(self, stamps: list[int], why: str
+                           ) -> tuple[dict[str, Any], float] | None:
+        """The set of the newest of these waiting depth images, without colour (lock held);
+        older ones are forgotten. None if there is none or no camera info yet."""
+        if not stamps or self._last_info is None:
+            return None
+        msg, receipt = self._waiting[max(stamps)]
+        for stamp in stamps:
+            del self._waiting[stamp]
+        msgs = self._claim({'color': None, 'depth': msg, 'camera_info': self._last_info})
+        if msgs is None:
+            return None
+        self.stats.colorless += 1
+        self._on_warning(f'color_{why}', _COLORLESS_WHY[why])
+        return msgs, receipt
 
     def _claim(self, msgs: dict[str, Any]) -> dict[str, Any] | None:
         """Accept a set unless its depth is not newer than one already handed on (lock held)."""
@@ -184,17 +267,10 @@ class Scheduler:
     def flush_colorless(self, now: float) -> None:
         """Hand on the newest depth image that waited ``color_timeout_s`` for its colour."""
         with self._lock:
-            expired = sorted(s for s, (_, t) in self._waiting.items()
-                             if now - t > self.color_timeout_s)
-            if not expired or self._last_info is None:
-                return
-            msg, receipt = self._waiting[expired[-1]]
-            for stamp in expired:
-                del self._waiting[stamp]
-            msgs = self._claim({'color': None, 'depth': msg, 'camera_info': self._last_info})
-            self.stats.colorless += msgs is not None
-        if msgs is not None:
-            self._slot.put((msgs, receipt))
+            lost = self._hand_on_colorless([s for s, (_, t) in self._waiting.items()
+                                            if now - t > self.color_timeout_s], 'late')
+        if lost is not None:
+            self._lost.put(lost)
 
     def missing_camera_info(self, now: float) -> bool:
         """Depth images have waited more than ``CAMERA_INFO_GRACE_S`` with no camera info."""
@@ -210,6 +286,7 @@ class Scheduler:
         self._floor_ns = None
         self._replace_sync()
         self._slot.clear()
+        self._lost.clear()
 
     def request_reset(self) -> None:
         """Reset the tracker before the next set, and forget the pending inputs."""
@@ -236,7 +313,8 @@ class Scheduler:
         """``(job, args)``: ``('process', (msgs, receipt))``, ``('prepare', (depth, info))``
         or ``('prepare_flow', (color, info))``, preferring complete sets; None after
         ``timeout`` s without any, or once closed."""
-        got = take_first([self._slot, self._early, self._early_color], timeout=timeout)
+        got = take_first([self._lost, self._slot, self._early, self._early_color],
+                         timeout=timeout)
         return None if got is None else (JOBS[got[0]], got[1])
 
     def begin_estimate(self, depth: Any) -> bool:
@@ -295,7 +373,7 @@ class Scheduler:
     # ------------------------------------------------------------------ shutdown
     def close(self) -> None:
         """Wake and stop the worker."""
-        for slot in (self._slot, self._early, self._early_color):
+        for slot in (self._lost, self._slot, self._early, self._early_color):
             slot.close()
 
     @property
