@@ -16,6 +16,9 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')),
         ('share/' + package_name + '/launch', glob('launch/*.py')),
     ],
+    # The committed motion-capture clips (and their licence notices) and the real frames.
+    package_data={'endeff_ros.synth.mocap': ['data/*/*'],
+                  'endeff_ros.realdata': ['data/*/*']},
     install_requires=['setuptools'],
     zip_safe=True,
     maintainer='endeff_ros developers',

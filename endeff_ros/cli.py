@@ -18,6 +18,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'eval': ('endeff_ros.evaluate', 'Score single-frame and temporal estimators on bags.'),
     'process': ('endeff_ros.bag.process', 'Run the tracker on rosbag2 bags, write results.'),
     'params': ('endeff_ros.core.params_cli', 'Print the parameter table or config YAML.'),
+    'mocap-fetch': ('endeff_ros.synth.mocap.fetch',
+                    'Copy motion-capture clips of one source into the local cache.'),
 }
 
 
