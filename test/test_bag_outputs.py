@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 from bag_helpers import BagSpec, FakeTracker, storage_file, write_bag
@@ -47,6 +48,10 @@ def test_check_output_path_problems(tmp_path: Path, monkeypatch: pytest.MonkeyPa
     def refuse(*_a: object, **_k: object) -> None:
         raise PermissionError(errno.EACCES, 'Permission denied')
 
+    monkeypatch.setattr(outputs.shutil, 'disk_usage', lambda _p: SimpleNamespace(free=512))
+    with pytest.raises(OutputError, match=r'no space left on device \(512 bytes free'):
+        check_output_path(tmp_path / 'new')
+    monkeypatch.undo()
     monkeypatch.setattr(outputs.tempfile, 'mkstemp', refuse)
     with pytest.raises(OutputError, match='cannot write in .*Permission denied'):
         check_output_path(tmp_path / 'new.json', kind='file')

@@ -34,6 +34,9 @@ if TYPE_CHECKING:
 WRITER_KEY = 'endeff.writer'
 WRITER = 'endeff process'
 _BAG_SUFFIXES = ('.mcap', '.db3')
+#: Below this much free space an output is refused before any work (a bag's metadata alone
+#: is a few kB; writing would fail at once with ENOSPC).
+MIN_FREE_BYTES = 1 << 20
 
 
 class OutputError(BagError):
@@ -131,6 +134,9 @@ def _check_writable(directory: Path, out: Path) -> None:
         raise OutputError(out, f'cannot write in {probe}: {err.strerror or err}') from err
     os.close(fd)
     os.unlink(name)
+    free = shutil.disk_usage(probe).free
+    if free < MIN_FREE_BYTES:
+        raise OutputError(out, f'no space left on device ({free} bytes free in {probe})')
 
 
 def check_output_option(path: str | None, prog: str, *, kind: str = 'file') -> None:
