@@ -69,6 +69,15 @@ def test_full_spec_list_covers_every_clip(clips):
         assert s.frames == min(longest[s.people[0].clip], 600)
 
 
+def test_committed_catalogue_gives_a_quick_suite():
+    from endeff_ros.synth.mocap.catalogue import load_clips
+
+    specs = suite_specs(load_clips(committed_only=True), quick=True)
+    assert len(specs) >= 40
+    assert {s.attributes['split'] for s in specs} == {'dev', 'test'}
+    assert len({s.sensor for s in specs}) >= 3
+
+
 def test_only_patterns(clips):
     specs = suite_specs(clips, quick=True)
     dev = synth_cli.select_specs(specs, 'dev__*')

@@ -88,15 +88,22 @@ def generate(out: Path, names: list[str], storages: list[str], *, quick: bool = 
         return {n: futs[n].result() for n in names}
 
 
+LOOP_S = 8.0  # full suite: cyclic clips (short walks, runs) repeated to this length
+
+
 def load_suite_clips(quick: bool, cache: Path | None) -> list:
     """The clips of the mocap suite: committed ones only for ``quick``, else the catalogue
-    with whatever has been fetched into ``cache``."""
+    with whatever has been fetched into ``cache`` and cyclic clips looped to ``LOOP_S`` (so
+    that a walk can cross the view)."""
+    from .mocap.catalogue import load_clips
+    from .mocap.kin import MocapError
+
     try:
-        from .mocap.catalogue import load_clips
-    except ImportError as exc:
-        msg = f'the clip catalogue (endeff_ros.synth.mocap.catalogue) is not available: {exc}'
+        return list(load_clips(cache_dir=cache, committed_only=quick,
+                               loop_s=None if quick else LOOP_S))
+    except (MocapError, OSError) as exc:
+        msg = f'could not load the clip catalogue: {exc}'
         raise ValueError(msg) from exc
-    return list(load_clips(cache_dir=cache, committed_only=quick))
 
 
 def select_specs(specs: list, only: str) -> list:

@@ -40,7 +40,7 @@ from .views import View, aim_camera, effective_kind, place
 FPS = 30.0
 QUICK_FRAMES = 24
 QUICK_BAGS = 48
-FULL_MAX_S = 20.0  # full suite: each clip up to this long (its most active segment)
+FULL_MAX_S = 5.0  # full suite: each clip up to this long (its most active segment)
 DETAILS_KEY = 'endeff.details'
 INTERACTIONS = ('none', 'occluder', 'sit', 'table', 'carry')
 _J = JOINT_INDEX
@@ -380,9 +380,9 @@ def dropped(seed: int, n: int) -> tuple[set[int], set[int]]:
 
 
 def write_bag(spec: BagSpec, clips: dict[str, MotionClip], out: Path,
-              storages: Sequence[str] = ('mcap',)) -> dict[str, Any]:
-    """Render ``spec`` and write ``out/<storage>/<spec.name>``; returns its attributes plus
-    ``frames`` (written)."""
+              storages: Sequence[str] = ('mcap',), compress: bool = True) -> dict[str, Any]:
+    """Render ``spec`` and write ``out/<storage>/<spec.name>`` (mcap chunks zstd-compressed
+    unless ``compress`` is false); returns its attributes plus ``frames`` (written)."""
     from .sequences import SequenceSpec
     from .writer import write_bags
 
@@ -391,5 +391,5 @@ def write_bag(spec: BagSpec, clips: dict[str, MotionClip], out: Path,
     paths = {s: Path(out) / s / spec.name for s in storages}
     meta = lambda: {ATTRIBUTES_KEY: json.dumps(ren.attributes(), sort_keys=True),  # noqa: E731
                     DETAILS_KEY: json.dumps(ren.details(), sort_keys=True)}
-    frames = write_bags(ren.frames(), seq, paths, spec.seed, custom_data=meta)
+    frames = write_bags(ren.frames(), seq, paths, spec.seed, custom_data=meta, compress=compress)
     return {**ren.attributes(), 'frames': frames}

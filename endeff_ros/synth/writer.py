@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
-from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from ..core.types import Intrinsics
@@ -112,11 +112,14 @@ def frame_messages(frame: SynthFrame, spec: SequenceSpec, rng: np.random.Generat
 
 def write_bags(frames: Iterable[SynthFrame], spec: SequenceSpec, paths: dict[str, Path],
                seed: int = 0,
-               custom_data: Callable[[], dict[str, str]] | None = None) -> int:
+               custom_data: Callable[[], dict[str, str]] | None = None,
+               compress: bool = False) -> int:
     """Write ``frames`` to one bag per storage (``paths``: storage name -> bag directory).
 
     ``custom_data`` is called once all frames are written (so it may describe them) and its
-    string pairs go into the rosbag2 metadata's ``custom_data``. Existing bag directories are
+    string pairs go into the rosbag2 metadata's ``custom_data``. ``compress`` zstd-compresses
+    the chunks of ``mcap`` bags (rosbag2's storage compression, read transparently by rosbags
+    and ros2 bag; depth shrinks about 5x, noisy colour 1.2x). Existing bag directories are
     replaced. Returns the number of frames written.
     """
     import shutil
@@ -128,6 +131,8 @@ def write_bags(frames: Iterable[SynthFrame], spec: SequenceSpec, paths: dict[str
             shutil.rmtree(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         w = Writer(path, version=9, storage_plugin=STORAGES[storage])
+        if compress and storage == 'mcap':
+            w.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         w.open()
         writers.append(w)
     try:
