@@ -29,20 +29,23 @@ import os
 import sys
 import time
 import traceback
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from endeff_ros.attributes import attribute_groups, custom_data, parse_attributes
+from endeff_ros.bag import progress as prog
 from endeff_ros.bag.errors import BagError
+from endeff_ros.bag.outputs import check_output_option
 from endeff_ros.bag.reader import (
     BagReader,
     ReaderOptions,
     add_reader_arguments,
     bag_name,
+    cpus,
     find_bags,
     options_from_args,
 )
@@ -186,8 +189,9 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
                  options: ReaderOptions | None = None, name: str | None = None,
                  estimate_fn: EstimateFn | None = None,
                  tracker_factory: TrackerFactory | None = None,
-                 log: Callable[[str], None] | None = None) -> SequenceResult:
-    """Run both estimators over one bag and score them.
+                 log: Callable[[str], None] | None = None,
+                 progress: Callable[[int], None] | None = None) -> SequenceResult:
+    """Run both estimators over one bag and score them (``progress(1)`` after each frame).
 
     ``estimate_fn(frame, params)`` (default :func:`estimate_frame`) must return an object with
     ``positions() -> (M, 3)``; ``tracker_factory(params)`` (default :class:`Tracker`) an object
@@ -244,6 +248,8 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
             if gt is not None and frame.stamp_ns in gt_ids:
                 ids = gt_ids[frame.stamp_ns]
                 kinds = kinds_of_ids(ids, person=res.person) if len(ids) == len(gt) else None
+            if progress is not None:
+                progress(1)
             for m in METHODS:
                 score = res.scorers[m].add(est[m], gt, kinds)
                 if score is not None:
@@ -506,13 +512,14 @@ def write_plots(report: dict[str, Any], out_dir: str | Path) -> list[Path]:
     return written
 
 
-def _eval_job(job: tuple[Path, str, EndeffParams | None, ReaderOptions, Any, Any]
+def _eval_job(job: tuple[Path, str, EndeffParams | None, ReaderOptions, Any, Any],
+              progress: Callable[[int], None] = prog.report
               ) -> SequenceResult | tuple[str, str]:
     path, name, params, options, estimate_fn, tracker_factory = job
     try:
         return evaluate_bag(path, params=params, options=options, name=name,
                             estimate_fn=estimate_fn, tracker_factory=tracker_factory,
-                            log=_stderr)
+                            log=_stderr, progress=progress)
     except BagError as err:
         return (str(path), str(err))
     except Exception as err:  # keep the other bags going; show where it broke
@@ -543,13 +550,25 @@ def evaluate_bags(paths: Sequence[str | Path], *, params: EndeffParams | None = 
         except BagError as err:
             failed.append((str(arg), str(err)))
     names = _unique_names(bags)
+    workers = min(jobs, len(bags))
+    if workers >= cpus():  # every core evaluates: no spare one for reading ahead
+        options = replace(options, prefetch=False)
     job_list = [(p, n, params, options, estimate_fn, tracker_factory)
                 for p, n in zip(bags, names, strict=True)]
-    if jobs > 1 and len(job_list) > 1:
-        with ProcessPoolExecutor(max_workers=min(jobs, len(job_list))) as pool:
-            outcomes = list(pool.map(_eval_job, job_list))
-    else:
-        outcomes = [_eval_job(j) for j in job_list]
+    total = prog.count_frames(bags, options) if sys.stderr.isatty() else 0
+    with prog.progress_bar(total, desc='endeff eval') as bar:
+        if workers > 1:
+            counter = prog.shared_counter()
+            with ProcessPoolExecutor(max_workers=workers, initializer=prog.init_worker,
+                                     initargs=(counter,)) as pool:
+                futures = [pool.submit(_eval_job, j) for j in job_list]
+                pending = set(futures)
+                while pending:
+                    _, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+                    bar.update_to(counter.value)
+                outcomes = [f.result() for f in futures]
+        else:
+            outcomes = [_eval_job(j, bar.update) for j in job_list]
     results = [o for o in outcomes if isinstance(o, SequenceResult)]
     failed.extend(o for o in outcomes if not isinstance(o, SequenceResult))
     return build_report(results, failed, params), results
@@ -558,6 +577,9 @@ def evaluate_bags(paths: Sequence[str | Path], *, params: EndeffParams | None = 
 def run(args: argparse.Namespace) -> int:
     """``endeff eval``: print the table, write JSON and plots; 1 if any bag failed."""
     params = load_params_option(args.params, 'endeff eval')
+    # Output problems end the command before any bag is read.
+    check_output_option(args.json, 'endeff eval')
+    check_output_option(args.plots, 'endeff eval', kind='dir')
     jobs = args.jobs if args.jobs and args.jobs > 0 else (os.cpu_count() or 1)
     report, _ = evaluate_bags(args.bags, params=params, options=options_from_args(args),
                               jobs=jobs)
@@ -569,8 +591,11 @@ def run(args: argparse.Namespace) -> int:
             fh.write('\n')
         _stderr(f'wrote {args.json}')
     if args.plots:
-        for p in write_plots(report, args.plots):
-            _stderr(f'wrote {p}')
+        try:
+            for p in write_plots(report, args.plots):
+                _stderr(f'wrote {p}')
+        except ImportError as err:  # matplotlib is optional on a robot
+            _stderr(f'endeff eval: no plots: {err} (install python3-matplotlib)')
     for f in report['failed']:
         _stderr(f'endeff eval: FAILED {f["error"]}')
     return 1 if report['failed'] or not report['sequences'] else 0

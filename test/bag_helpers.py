@@ -17,7 +17,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pytest
 from rosbags.rosbag2 import Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
 from rosbags.typesys import Stores, get_typestore
@@ -205,24 +204,6 @@ def write_bag(path: Path, spec: BagSpec | None = None) -> dict[int, np.ndarray]:
 def bench_like_spec(frames: int = 6, **kw: Any) -> BagSpec:
     """640x480, Kinect-like focal length, blobs about 10 cm across."""
     return BagSpec(frames=frames, width=640, height=480, fx=525.0, blob_px=13, **kw)
-
-
-@pytest.fixture
-def real_core() -> None:
-    """Skip unless the real algorithm core (estimate_frame, Tracker) is implemented."""
-    from endeff_ros.core.single_frame import estimate_frame
-    from endeff_ros.core.tracker import Tracker
-    from endeff_ros.core.types import Intrinsics, RGBDFrame
-
-    depth = np.full((48, 64), 2.0, np.float32)
-    frame = RGBDFrame(0, 'cam', depth, Intrinsics(80.0, 80.0, 31.5, 23.5, 64, 48))
-    for call in (lambda: estimate_frame(frame), lambda: Tracker().update(frame)):
-        try:
-            call()
-        except NotImplementedError:
-            pytest.skip('algorithm core not implemented yet (stubs raise NotImplementedError)')
-        except Exception:  # noqa: S112 - a real core may reject this toy frame
-            continue
 
 
 def storage_file(bag: Path) -> Path:

@@ -190,7 +190,6 @@ def test_corrupt_compressed_frame_names_bag_and_stamp(tmp_path: Path) -> None:
 def test_process_and_eval_read_compressed_bags(tmp_path: Path,
                                                monkeypatch: pytest.MonkeyPatch) -> None:
     """``endeff process`` on a compressed recording gives the clouds of its raw twin."""
-    pytest.importorskip('rclpy')
     from bag_helpers import FakeTracker, fake_estimate_frame, write_bag
     from rosbags.highlevel import AnyReader
 

@@ -21,8 +21,6 @@ from endeff_ros.bag.outputs import OutputError, check_output_option, check_outpu
 from endeff_ros.bag.process import OUTPUT_TOPICS, process_bag
 from endeff_ros.cli import main as cli_main
 
-pytest.importorskip('rclpy')
-
 TEST_DIR = Path(__file__).resolve().parent
 
 

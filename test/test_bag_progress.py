@@ -12,7 +12,6 @@ from endeff_ros.bag import progress
 
 
 def test_bar_shows_frames_rate_and_eta(capsys: pytest.CaptureFixture[str]) -> None:
-    pytest.importorskip('tqdm')
     with progress.progress_bar(40, enabled=True) as bar:
         assert bar.enabled
         bar.update(10)
@@ -35,7 +34,6 @@ def test_no_bar_off_a_terminal_or_without_tqdm(capsys: pytest.CaptureFixture[str
 
 
 def test_total_grows_past_the_estimate(capsys: pytest.CaptureFixture[str]) -> None:
-    pytest.importorskip('tqdm')
     with progress.progress_bar(2, enabled=True) as bar:
         bar.update(5)
     assert '5/5' in capsys.readouterr().err

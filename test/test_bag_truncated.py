@@ -84,7 +84,7 @@ def test_eval_scores_the_readable_part(tmp_path: Path) -> None:
 def test_process_truncated_bag_and_folder_without_metadata(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
-    pytest.importorskip('rclpy')
+
     import endeff_ros.core.tracker as tracker_mod
     from endeff_ros.cli import main as cli_main
 
@@ -105,7 +105,6 @@ def test_process_truncated_bag_and_folder_without_metadata(
 
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
 def test_copy_input_of_a_truncated_bag(tmp_path: Path, storage: str) -> None:
-    pytest.importorskip('rclpy')
     from rosbags.highlevel import AnyReader
 
     from endeff_ros.bag.process import process_bag

@@ -7,13 +7,12 @@ import sys
 
 import numpy as np
 import pytest
+import rosbags.typesys as rosbags_typesys
+import sensor_msgs.msg as sensor_msgs
 
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.types import Intrinsics, Track
 from endeff_ros.ros import convert
-
-sensor_msgs = pytest.importorskip('sensor_msgs.msg')
-rosbags_typesys = pytest.importorskip('rosbags.typesys')
 
 
 @pytest.fixture(scope='module')

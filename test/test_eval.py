@@ -16,7 +16,6 @@ from bag_helpers import (
     FakeTracker,
     bench_like_spec,
     fake_estimate_frame,
-    real_core,  # noqa: F401 - fixture
     write_bag,
 )
 
@@ -102,7 +101,7 @@ def test_duplicate_names_and_failures(tmp_path: Path) -> None:
 
 
 def test_groups_use_synth_names(tmp_path: Path) -> None:
-    synth = pytest.importorskip('endeff_ros.synth', reason='synthetic generator not present')
+    from endeff_ros import synth
     groups = synth.GROUPS
     name = groups['occlusion'][0]
     write_bag(tmp_path / name, BagSpec(frames=3))
@@ -180,7 +179,6 @@ def test_parallel_jobs_same_result(tmp_path: Path) -> None:
     assert strip == [{k: v for k, v in s.items() if k != 'seconds'} for s in two['sequences']]
 
 
-@pytest.mark.usefixtures('real_core')
 def test_real_estimators_on_foreign_bag(tmp_path: Path) -> None:
     """The real core on a bag this project did not write: runs, report in the spec's form."""
     write_bag(tmp_path / 'blobs', bench_like_spec(frames=5))
@@ -192,10 +190,8 @@ def test_real_estimators_on_foreign_bag(tmp_path: Path) -> None:
         assert 0.0 <= seq[m]['recall'] <= 1.0 and 0.0 <= seq[m]['fpr'] <= 1.0
 
 
-@pytest.mark.usefixtures('real_core')
 def test_real_estimators_on_synth_bags(tmp_path: Path) -> None:
     """``endeff synth --quick`` bags, both storages, scored by the real estimators."""
-    pytest.importorskip('endeff_ros.synth.cli', reason='endeff synth not present yet')
     out = tmp_path / 'synth'
     names = ['jumping_jacks', 'star']
     assert cli_main(['synth', '--out', str(out), '--quick', '--only', ','.join(names)]) == 0
@@ -311,7 +307,6 @@ def test_attribute_groups_and_kinds(tmp_path: Path, capsys: pytest.CaptureFixtur
 
 
 def test_paper_person_sequences_have_kinds(tmp_path: Path) -> None:
-    pytest.importorskip('endeff_ros.synth.sequences', reason='synthetic generator not present')
     people = dict(frames=2, width=160, n_blobs=5)
     for name in ('jumping_jacks', 'two_people', 'chair', 'punching'):
         write_bag(tmp_path / name, BagSpec(**people))
@@ -323,3 +318,34 @@ def test_paper_person_sequences_have_kinds(tmp_path: Path) -> None:
     assert kinds == {'jumping_jacks': ['head', 'hand', 'foot'],
                      'two_people': ['head', 'hand', 'foot'],
                      'chair': ['other'], 'punching': ['other']}
+
+
+def test_unwritable_json_fails_before_any_bag_is_read(tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]
+                                                       ) -> None:
+    (tmp_path / 'file').write_text('not a folder')
+    with pytest.raises(SystemExit) as exc:
+        cli_main(['eval', str(tmp_path / 'no_such_bag'), '--json',
+                  str(tmp_path / 'file' / 'report.json')])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert 'report.json' in err and 'no_such_bag' not in err  # the bag was never looked at
+
+
+def test_progress_counts_every_frame(tmp_path: Path) -> None:
+    from endeff_ros.evaluate import evaluate_bag
+
+    write_bag(tmp_path / 'seq', BagSpec(frames=7))
+    seen: list[int] = []
+    evaluate_bag(tmp_path / 'seq', estimate_fn=fake_estimate_frame, tracker_factory=FakeTracker,
+                 progress=seen.append)
+    assert seen == [1] * 7
+
+
+def test_plots_without_matplotlib_are_reported(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    write_bag(tmp_path / 'seq', BagSpec(frames=3))
+    _patch_core(monkeypatch, [])
+    monkeypatch.setitem(sys.modules, 'matplotlib', None)  # import matplotlib -> ImportError
+    assert cli_main(['eval', str(tmp_path / 'seq'), '--plots', str(tmp_path / 'plots')]) == 0
+    assert 'no plots' in capsys.readouterr().err

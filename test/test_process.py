@@ -12,7 +12,6 @@ from bag_helpers import (
     BagSpec,
     FakeTracker,
     bench_like_spec,
-    real_core,  # noqa: F401 - fixture
     write_bag,
 )
 
@@ -21,8 +20,6 @@ from endeff_ros.bag.process import OUTPUT_CLOUD, OUTPUT_MARKERS, process_bag, pr
 from endeff_ros.bag.reader import read_frames
 from endeff_ros.cli import main as cli_main
 from endeff_ros.ros import convert
-
-pytest.importorskip('rclpy')
 
 FRAME_ID = 'camera_color_optical_frame'
 
@@ -210,7 +207,6 @@ def test_same_output_names_are_an_error(tmp_path: Path) -> None:
     assert all(r.error and 'same output' in r.error for r in res)
 
 
-@pytest.mark.usefixtures('real_core')
 def test_process_equals_direct_tracker_real_core(tmp_path: Path) -> None:
     """Real Tracker: the output end-effectors equal running the Tracker on the same frames."""
     from endeff_ros.core.tracker import Tracker
@@ -229,7 +225,6 @@ def test_process_equals_direct_tracker_real_core(tmp_path: Path) -> None:
 
 def test_synth_bags_both_storages(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``endeff synth --quick`` bags (mcap and sqlite3) through ``endeff process``."""
-    pytest.importorskip('endeff_ros.synth.cli', reason='endeff synth not present yet')
     _fake_tracker_everywhere(monkeypatch)
     data = tmp_path / 'synth'
     assert cli_main(['synth', '--out', str(data), '--quick', '--only', 'waving_one_hand']) == 0

@@ -6,7 +6,6 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from endeff_ros.ros import convert
 from tools.procs import profile_path, ros_env
@@ -19,8 +18,6 @@ from tools.replay import (
     restamp,
     unpaired_depth,
 )
-
-pytest.importorskip('sensor_msgs.msg')
 
 NS = '{http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles}'
 
