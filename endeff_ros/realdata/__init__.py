@@ -1,6 +1,9 @@
 """Real, hand-labelled Kinect v1 depth frames of people as benchmark bags.
 
-Two public sources, committed under ``data/`` beside their licence notices:
+Two public sources; only our hand labels and the sources' notices are committed, under
+``data/<source>/`` (``labels.yaml``, ``NOTICE.md``). The raw frames are copied from the
+sources' repositories into a local cache (default ``data/realdata-cache/<source>/``, beside
+the source's licence file) by :mod:`endeff_ros.realdata.fetch`:
 
 - ``skeltrack``: the 12 depth frames of Skeltrack's tests (one person facing the camera at
   about 1.2 m, upper body; two frames show a second person behind), LGPL-3.0;
@@ -13,6 +16,8 @@ values; camera info; the hand labels of ``data/<source>/labels.yaml`` as ground 
 depth stamps) and records the source's attributes in the bag metadata
 (:data:`endeff_ros.attributes.ATTRIBUTES_KEY`). Bags are generated, never committed::
 
+    python -m endeff_ros.realdata fetch skeltrack
+    python -m endeff_ros.realdata fetch five_people
     python -m endeff_ros.realdata build data/real
     endeff eval data/real
 
@@ -32,9 +37,15 @@ import numpy as np
 
 from endeff_ros.attributes import ATTRIBUTES_KEY
 from endeff_ros.realdata.labels import Label, LabelError, gt_arrays, make_label, read_labels
-from endeff_ros.realdata.sources import RealFrame, read_five_people, read_skeltrack
+from endeff_ros.realdata.sources import (
+    RealFrame,
+    SourceError,
+    read_five_people,
+    read_skeltrack,
+)
 
 DATA_DIR = Path(__file__).resolve().parent / 'data'
+DEFAULT_CACHE = Path('data') / 'realdata-cache'
 FRAME_ID = 'camera_depth_optical_frame'
 START_NS = 1_700_000_000_000_000_000
 PERIOD_NS = 33_333_333
@@ -43,50 +54,58 @@ COLOR_OFFSET_NS = 2_000_000  # colour stamped a little after depth, as on real d
 
 @dataclass(frozen=True)
 class Source:
-    """One data source: its folder under ``data/``, its frame files and reader, attributes."""
+    """One data source: its frame files in the cache (in bag order), reader, attributes.
+
+    ``labels_dir`` holds ``labels.yaml`` (our committed labels: ``data/<name>`` unless given).
+    """
 
     name: str
-    pattern: str
+    files: tuple[str, ...]
     read: Callable[[Path], RealFrame]
     attributes: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def folder(self) -> Path:
-        """``data/<name>``."""
-        return DATA_DIR / self.name
+    labels_dir: Path | None = None
 
     @property
     def labels_path(self) -> Path:
         """The hand labels of this source."""
-        return self.folder / 'labels.yaml'
+        return (self.labels_dir or DATA_DIR / self.name) / 'labels.yaml'
 
-    def files(self) -> list[Path]:
-        """Frame files, ordered by the number in their name (Skeltrack's capture counter)."""
-        def key(p: Path) -> tuple[int, str]:
-            digits = ''.join(c for c in p.name if c.isdigit())
-            return (int(digits) if digits else 0, p.name)
+    def paths(self, cache: str | Path = DEFAULT_CACHE) -> list[Path]:
+        """The frame files in ``cache/<name>``; a missing one is a :class:`SourceError` that
+        names the fetch command."""
+        folder = Path(cache) / self.name
+        missing = [f for f in self.files if not (folder / f).is_file()]
+        if missing:
+            option = '' if Path(cache) == DEFAULT_CACHE else f' --cache {cache}'
+            msg = (f'{folder}: {len(missing)} of {len(self.files)} {self.name} frame files '
+                   f'missing ({missing[0]}); run `python -m endeff_ros.realdata fetch '
+                   f'{self.name}{option}` first')
+            raise SourceError(msg)
+        return [folder / f for f in self.files]
 
-        return sorted(self.folder.glob(self.pattern), key=key)
+    def frames(self, cache: str | Path = DEFAULT_CACHE) -> list[RealFrame]:
+        """All frames of the source, read from the cache."""
+        return [self.read(p) for p in self.paths(cache)]
 
-    def frames(self) -> list[RealFrame]:
-        """All frames of the source."""
-        return [self.read(p) for p in self.files()]
 
+SKELTRACK_FRAMES = tuple(f'depth-data-{n}.gz' for n in (
+    82823944, 1028894671, 1038901490, 1045879925, 1051883281, 1058893191, 1064898470,
+    1070905432, 1078881076, 1166565565, 1234568668, 1399145206))
+"""Ordered by the capture counter in the names (gzip-compressed copies, see ``fetch``)."""
 
 SOURCES: dict[str, Source] = {
-    'skeltrack': Source('skeltrack', 'depth-data-*.gz', read_skeltrack, {
+    'skeltrack': Source('skeltrack', SKELTRACK_FRAMES, read_skeltrack, {
         'source': 'skeltrack', 'sensor': 'kinect_v1', 'view': 'front', 'people': 1,
         'room': 'background removed', 'real': True}),
-    'five_people': Source('five_people', '*.pcd', lambda p: read_five_people(p)[0], {
+    'five_people': Source('five_people', ('five_people.pcd',),
+                          lambda p: read_five_people(p)[0], {
         'source': 'pcl_five_people', 'sensor': 'kinect_v1', 'view': 'back', 'people': 5,
         'room': 'corridor', 'real': True}),
 }
 
 
-def source_labels(source: Source, frames: list[RealFrame] | None = None
-                  ) -> dict[str, list[Label]]:
+def source_labels(source: Source, frames: list[RealFrame]) -> dict[str, list[Label]]:
     """The source's labels lifted with its frames' depth (``{frame name: labels}``)."""
-    frames = frames if frames is not None else source.frames()
     picks = read_labels(source.labels_path)
     by_name = {f.name: f for f in frames}
     out: dict[str, list[Label]] = {}
@@ -99,7 +118,8 @@ def source_labels(source: Source, frames: list[RealFrame] | None = None
     return out
 
 
-def build_bag(source: Source, out: Path, *, storage: str = 'mcap', repeat: int = 1) -> int:
+def build_bag(source: Source, out: Path, *, cache: str | Path = DEFAULT_CACHE,
+              storage: str = 'mcap', repeat: int = 1) -> int:
     """Write ``source`` as one bag at ``out`` (replaced if it exists); returns frames written.
 
     Each frame is written ``repeat`` times in a row (consecutive stamps, the same labels), so
@@ -115,7 +135,7 @@ def build_bag(source: Source, out: Path, *, storage: str = 'mcap', repeat: int =
     if repeat < 1:
         msg = f'repeat must be >= 1, got {repeat}'
         raise ValueError(msg)
-    frames = source.frames()
+    frames = source.frames(cache)
     labels = source_labels(source, frames)
     spec = SequenceSpec(source.name, frames=len(frames) * repeat)
     out = Path(out)
@@ -148,15 +168,17 @@ def build_bag(source: Source, out: Path, *, storage: str = 'mcap', repeat: int =
     return count
 
 
-def build_bags(out_dir: str | Path, *, names: list[str] | None = None, storage: str = 'mcap',
-               repeat: int = 1) -> list[Path]:
-    """One bag per source (``names``, default all) under ``out_dir``; returns their paths."""
+def build_bags(out_dir: str | Path, *, names: list[str] | None = None,
+               cache: str | Path = DEFAULT_CACHE, storage: str = 'mcap', repeat: int = 1
+               ) -> list[Path]:
+    """One bag per source (``names``, default all) under ``out_dir`` from the frames in
+    ``cache``; returns their paths."""
     written = []
     for name in names or list(SOURCES):
         if name not in SOURCES:
             msg = f'unknown source {name!r} (have {", ".join(SOURCES)})'
             raise ValueError(msg)
         path = Path(out_dir) / name
-        build_bag(SOURCES[name], path, storage=storage, repeat=repeat)
+        build_bag(SOURCES[name], path, cache=cache, storage=storage, repeat=repeat)
         written.append(path)
     return written

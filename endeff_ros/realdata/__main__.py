@@ -1,10 +1,15 @@
-"""``python -m endeff_ros.realdata``: build the real-frame bags, render frames for labelling,
-re-lift the labels after a pick was moved.
+"""``python -m endeff_ros.realdata``: fetch the real frames, build the real-frame bags, render
+frames for labelling, re-lift the labels after a pick was moved.
 
+- ``fetch SOURCE [--from SRC] [--cache DIR]``: copy a source's frames and licence from its
+  repository into the cache (see :mod:`endeff_ros.realdata.fetch`);
 - ``build OUT [--sources a,b] [--storage mcap|sqlite3] [--repeat N]``: one bag per source;
 - ``render OUT``: per frame a PNG of the depth (or colour) with a pixel grid (lines every
   20 px, numbered every 100 px) and the labels (circle of radius ``r_px``, id);
 - ``label``: recompute ``depth_m`` and ``xyz`` of every ``labels.yaml`` from its picks.
+
+``build``, ``render`` and ``label`` read the frames from the cache (``--cache``, default
+``data/realdata-cache``) and the labels from the package.
 """
 
 from __future__ import annotations
@@ -15,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from endeff_ros.realdata import SOURCES, build_bags, source_labels
+from endeff_ros.realdata import DEFAULT_CACHE, SOURCES, build_bags, source_labels
 from endeff_ros.realdata.labels import LabelError, read_labels, write_labels
 from endeff_ros.realdata.sources import SourceError, depth_to_grey
 
@@ -26,14 +31,14 @@ depth_m is the median depth of the part's pixels, xyz the part's centre behind t
 Ids: per person 0 head, 1 left hand, 2 right hand, 3 left foot, 4 right foot, +5 per person."""
 
 
-def render(out_dir: Path) -> list[Path]:
+def render(out_dir: Path, cache: Path = DEFAULT_CACHE) -> list[Path]:
     """PNGs of every frame with grid and labels, for picking and reviewing labels."""
     import cv2
 
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for source in SOURCES.values():
-        frames = source.frames()
+        frames = source.frames(cache)
         labels = source_labels(source, frames)
         for frame in frames:
             img = np.ascontiguousarray(frame.rgb[:, :, ::-1])
@@ -62,12 +67,12 @@ def render(out_dir: Path) -> list[Path]:
     return written
 
 
-def relabel() -> list[Path]:
+def relabel(cache: Path = DEFAULT_CACHE) -> list[Path]:
     """Recompute every labels file from its picks (in place)."""
     written = []
     for source in SOURCES.values():
         read_labels(source.labels_path)  # clear error before anything is written
-        labels = source_labels(source)
+        labels = source_labels(source, source.frames(cache))
         write_labels(source.labels_path, labels, LABELS_HEADER.format(source=source.name))
         written.append(source.labels_path)
     return written
@@ -78,6 +83,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='python -m endeff_ros.realdata',
                                      description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest='command', required=True)
+    f = sub.add_parser('fetch', help="copy a source's frames and licence into the cache")
+    f.add_argument('source', choices=list(SOURCES))
+    f.add_argument('--from', dest='src', default=None,
+                   help='git URL, git directory or folder laid out like the repository '
+                   "(default: the source's public repository)")
     b = sub.add_parser('build', help='write one benchmark bag per source')
     b.add_argument('out', type=Path, help='output folder (bags are replaced)')
     b.add_argument('--sources', default=','.join(SOURCES),
@@ -87,16 +97,22 @@ def main(argv: list[str] | None = None) -> int:
                    help='write every frame N times in a row (a still scene; default 1)')
     r = sub.add_parser('render', help='PNG per frame with pixel grid and labels')
     r.add_argument('out', type=Path)
-    sub.add_parser('label', help="recompute the labels' depth and xyz from their picks")
+    la = sub.add_parser('label', help="recompute the labels' depth and xyz from their picks")
+    for p in (f, b, r, la):
+        p.add_argument('--cache', type=Path, default=DEFAULT_CACHE,
+                       help=f'frame cache (default {DEFAULT_CACHE})')
     args = parser.parse_args(argv)
     try:
+        if args.command == 'fetch':
+            from endeff_ros.realdata.fetch import run
+            return run(args.source, args.src, args.cache)
         if args.command == 'build':
             paths = build_bags(args.out, names=[s for s in args.sources.split(',') if s],
-                               storage=args.storage, repeat=args.repeat)
+                               cache=args.cache, storage=args.storage, repeat=args.repeat)
         elif args.command == 'render':
-            paths = render(args.out)
+            paths = render(args.out, args.cache)
         else:
-            paths = relabel()
+            paths = relabel(args.cache)
     except (SourceError, LabelError, ValueError, OSError) as err:
         print(f'realdata {args.command}: {err}', file=sys.stderr)
         return 1
