@@ -62,11 +62,14 @@ def test_quick_spec_list(clips):
 
 
 def test_full_spec_list_covers_every_clip(clips):
-    specs = suite_specs(clips)
+    specs = suite_specs(clips, max_s=1.5)
     assert {c.name for c in clips} <= {s.people[0].clip for s in specs}
     longest = {c.name: len(c.positions) for c in clips}
     for s in specs:
-        assert s.frames == min(longest[s.people[0].clip], 600)
+        assert s.frames == min(longest[s.people[0].clip], 45)
+    assert max(s.frames for s in suite_specs(clips)) == 60  # whole clips under FULL_MAX_S
+    with pytest.raises(ValueError, match='max_s'):
+        suite_specs(clips, max_s=0)
 
 
 def test_committed_catalogue_gives_a_quick_suite():

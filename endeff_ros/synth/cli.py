@@ -41,6 +41,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "bag names (e.g. 'dev__*'); default all")
     parser.add_argument('--clip-cache', type=Path, default=None,
                         help="mocap: folder of fetched clips (default: the catalogue's own)")
+    parser.add_argument('--max-seconds', type=float, default=None,
+                        help='mocap full suite: longest segment per clip in s (default 5)')
     parser.add_argument('--list', action='store_true',
                         help='mocap: print the bag names and attributes, render nothing')
     parser.add_argument('--jobs', type=int, default=0,
@@ -131,7 +133,10 @@ def run_mocap(args: argparse.Namespace, storages: list[str]) -> int:
 
     try:
         clips = load_suite_clips(args.quick, args.clip_cache)
-        specs = select_specs(suite_specs(clips, quick=args.quick, seed=args.seed), args.only)
+        extra = {} if getattr(args, 'max_seconds', None) is None else {
+            'max_s': args.max_seconds}
+        specs = select_specs(suite_specs(clips, quick=args.quick, seed=args.seed, **extra),
+                             args.only)
     except ValueError as exc:
         print(f'endeff synth: {exc}', file=sys.stderr)
         return 2

@@ -39,6 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--tiles', action='store_true',
                         help='one captioned tile per bag (middle frame) instead of rows')
     parser.add_argument('--cols', type=int, default=6, help='tiles per row (default 6)')
+    parser.add_argument('--tile-width', type=int, default=300,
+                        help='tile width in pixels (default 300)')
 
 
 def find_bags(paths: list[Path]) -> list[Path]:
@@ -185,9 +187,6 @@ def contact_sheet(bags: list[Path], n_frames: int = 4, scale: float = 0.4
     return np.concatenate(rows, 0)
 
 
-TILE_W = 300  # px
-
-
 def bag_attributes(bag: Path) -> dict:
     """The attributes a bag records in its rosbag2 metadata (``{}`` if none or unreadable)."""
     from rosbags.highlevel import AnyReader
@@ -213,9 +212,9 @@ def attribute_line(attrs: dict) -> str:
     return ' '.join(p for p in parts if p)
 
 
-def tile_sheet(bags: list[Path], cols: int = 6) -> npt.NDArray[np.uint8]:
+def tile_sheet(bags: list[Path], cols: int = 6, tile_w: int = 300) -> npt.NDArray[np.uint8]:
     """One tile per bag (middle frame: colour with ground truth, depth inset in the corner,
-    name and attribute line below), ``cols`` per row; BGR (H, W, 3) uint8."""
+    name and attribute line below), ``cols`` per row, ``tile_w`` px wide; BGR (H, W, 3)."""
     tiles = []
     for bag in bags:
         samples = read_samples(bag, 3)
@@ -223,16 +222,17 @@ def tile_sheet(bags: list[Path], cols: int = 6) -> npt.NDArray[np.uint8]:
             continue
         s = samples[len(samples) // 2]
         h, w = s['depth'].shape
-        scale = TILE_W / w
+        scale = tile_w / w
         th = int(round(h * scale))
-        img = (cv2.resize(s['color'], (TILE_W, th), interpolation=cv2.INTER_AREA)
-               if s['color'] is not None else np.zeros((th, TILE_W, 3), np.uint8))
+        img = (cv2.resize(s['color'], (tile_w, th), interpolation=cv2.INTER_AREA)
+               if s['color'] is not None else np.zeros((th, tile_w, 3), np.uint8))
         _draw_gt(img, s['k'], s['gt'], scale)
-        inset = cv2.resize(_depth_vis(s['depth']), (TILE_W // 3, th // 3),
+        inset = cv2.resize(_depth_vis(s['depth']), (tile_w // 3, th // 3),
                            interpolation=cv2.INTER_NEAREST)
         img[:inset.shape[0], -inset.shape[1]:] = inset
-        cap = np.full((30, TILE_W, 3), 40, np.uint8)
-        for row, text in enumerate((bag.name[:52], attribute_line(bag_attributes(bag)))):
+        cap = np.full((30, tile_w, 3), 40, np.uint8)
+        chars = tile_w * 52 // 300
+        for row, text in enumerate((bag.name[:chars], attribute_line(bag_attributes(bag)))):
             cv2.putText(cap, text, (3, 12 + 14 * row), cv2.FONT_HERSHEY_SIMPLEX, 0.33,
                         (255, 255, 255), 1, cv2.LINE_AA)
         tiles.append(np.concatenate([img, cap], 0))
@@ -254,14 +254,15 @@ def run(args: argparse.Namespace) -> int:
         return 2
     try:
         if getattr(args, 'tiles', False):
-            sheet = tile_sheet(bags, max(1, getattr(args, 'cols', 6)))
+            sheet = tile_sheet(bags, max(1, getattr(args, 'cols', 6)),
+                               max(120, getattr(args, 'tile_width', 300)))
         else:
             sheet = contact_sheet(bags, args.frames, args.scale)
     except ValueError as exc:
         print(f'endeff sheet: {exc}', file=sys.stderr)
         return 2
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(args.out), sheet):
+    if not cv2.imwrite(str(args.out), sheet, [cv2.IMWRITE_PNG_COMPRESSION, 9]):
         print(f'endeff sheet: could not write {args.out}', file=sys.stderr)
         return 1
     print(f'wrote {args.out} ({sheet.shape[1]}x{sheet.shape[0]}, {len(bags)} bags)')

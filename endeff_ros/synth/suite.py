@@ -132,13 +132,16 @@ def _is_walk(clip: MotionClip, pos: npt.NDArray[np.float64], n: int) -> bool:
     return float(np.linalg.norm((seg[-1] - seg[0])[[0, 2]])) >= 0.4
 
 
-def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int = 0
-                ) -> list[BagSpec]:
+def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int = 0,
+                max_s: float = FULL_MAX_S) -> list[BagSpec]:
     """The suite's bag specs for ``clips``: quick = ``QUICK_BAGS`` bags (clips repeat if
-    fewer) of ``QUICK_FRAMES`` frames; full = one bag per clip, each up to ``FULL_MAX_S`` s
-    (its most active segment), plus one multi-person bag per 8 clips."""
+    fewer) of ``QUICK_FRAMES`` frames; full = one bag per clip, each up to ``max_s`` s (its
+    most active segment), plus one multi-person bag per 8 clips."""
     if not clips:
         msg = 'the mocap suite needs at least one clip'
+        raise ValueError(msg)
+    if not max_s > 0:
+        msg = f'max_s must be positive, got {max_s}'
         raise ValueError(msg)
     order = sorted(clips, key=lambda c: c.name)
     pos = {c.name: resampled(c) for c in order}
@@ -150,7 +153,7 @@ def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
     for i in range(count):
         rng = np.random.default_rng([seed, 7, i])
         clip = order[i % len(order)]
-        n = QUICK_FRAMES if quick else int(min(len(pos[clip.name]), FULL_MAX_S * FPS))
+        n = QUICK_FRAMES if quick else int(min(len(pos[clip.name]), max(2, round(max_s * FPS))))
         people = _PEOPLE[i % len(_PEOPLE)] if (quick or i >= len(order)) else 1
         if not quick and i >= len(order):
             people = 2 + i % 2
@@ -176,8 +179,8 @@ def _spec(i: int, clip: MotionClip, order: list[MotionClip], pos: dict, n: int, 
         interaction = ('table', 'occluder', 'none')[i % 3]
     else:
         interaction = 'carry' if (i % 11 == 4 and people == 1) else 'none'
-    far = sensor.z_max - 0.7
-    dist = float(rng.uniform(1.2, min(5.0, far)))
+    far = min(5.0, sensor.z_max - 0.7)
+    dist = float(rng.uniform(1.2, far))
     cam_h = float(rng.uniform(0.6, 2.2))
     tilt = float(rng.uniform(-6.0, 6.0))
     roll = float(rng.uniform(-15.0, 15.0)) if rng.random() < 0.3 else 0.0
@@ -197,9 +200,12 @@ def _spec(i: int, clip: MotionClip, order: list[MotionClip], pos: dict, n: int, 
         other = pool[int(rng.integers(len(pool)))]
         okind = effective_kind(pos[other.name][:n], 'across') if walkers else kind
         sep = 0.0 if okind == 'across' else (k - 0.5) * 0.75 * (-1) ** k
+        # Behind the first person if the sensor still reaches there, else in front of it.
+        odist = next((d for d in (dist + 0.85 * k, dist - 0.85 * k) if 1.2 <= d <= far),
+                     float(np.clip(dist + 0.85 * k, 1.2, far)))
         persons.append(PersonSpec(
             other.name, _window(pos[other.name], n, 'walk'), _style(rng),
-            View('across', round(dist + 0.85 * k, 2), round(cam_h, 2), round(tilt, 1),
+            View('across', round(odist, 2), round(cam_h, 2), round(tilt, 1),
                  round(roll, 1), round(off + sep, 2), -side if k % 2 else side),
             int(rng.integers(1000))))
     view_kind = effective_kind(pos[clip.name][first.start:first.start + n], kind)
