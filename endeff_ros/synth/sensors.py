@@ -103,7 +103,7 @@ def _edges(z: npt.NDArray[np.float32], rel: float = 0.04, floor: float = 0.08
 
 def _cos_incidence(ren: Rendered) -> npt.NDArray[np.float32]:
     view = background(ren.camera).view
-    return np.abs((ren.normal * view).sum(2)).astype(np.float32)
+    return np.abs(np.einsum('ijk,ijk->ij', ren.normal, view)).astype(np.float32, copy=False)
 
 
 def tof_depth(ren: Rendered, model: SensorModel,
@@ -160,15 +160,15 @@ def stereo_depth(ren: Rendered, model: SensorModel,
     reach[:, :-1] = disp[:, 1:] - np.float32(1.0)
     span = int(min(np.ceil(disp.max() - disp[finite].min()), 128)) if finite.any() else 0
     m = 1
-    while m < span:
-        nxt = reach.copy()
-        nxt[:, :-m] = np.maximum(reach[:, :-m], reach[:, m:] - np.float32(m))
-        reach, m = nxt, 2 * m
+    while m < span:  # numpy buffers the overlapping operands of the in-place maximum
+        np.maximum(reach[:, :-m], reach[:, m:] - np.float32(m), out=reach[:, :-m])
+        m *= 2
     occluded = reach > disp + np.float32(0.5)
     # Block matching fattens the foreground: background pixels next to a much nearer one take
     # its disparity (half of them, within 2 px).
     dil = cv2.dilate(disp, np.ones((5, 5), np.uint8))
-    fat = (dil > disp * np.float32(1.08) + np.float32(0.5)) & (rng.random((h, w)) < 0.5)
+    coin = rng.random((h, w), dtype=np.float32)
+    fat = (dil > disp * np.float32(1.08) + np.float32(0.5)) & (coin < 0.5)
     d = np.where(fat, dil, disp)
     # Sub-pixel noise, independent plus correlated (speckle pattern of the projector).
     small = structured_light._noise((h // 8 + 2, w // 8 + 2), rng)
@@ -179,7 +179,7 @@ def stereo_depth(ren: Rendered, model: SensorModel,
     # Invalid: no surface, occluded, grazing, low texture on weak returns, small blobs.
     cos_inc = _cos_incidence(ren)
     lum = ren.color @ np.array([0.3, 0.55, 0.15], np.float32)
-    weak = (lum < 0.12) & (rng.random((h, w), dtype=np.float32) < 0.5)
+    weak = (lum < 0.12) & (coin >= 0.5)  # the other half of the same draw as ``fat``
     missing = ~finite | occluded | (cos_inc < np.float32(np.cos(np.deg2rad(80.0)))) | weak
     n_blobs = rng.poisson(3e-4 * h * w)
     bv, bu = rng.integers(0, h, n_blobs), rng.integers(0, w, n_blobs)
