@@ -218,3 +218,14 @@ def test_sitting_gets_a_chair_under_the_pelvis():
     assert seat.part == 'chair_seat'
     assert np.hypot(*(seat.center - low)[[0, 2]]) < 0.15
     assert 0.05 < low[1] - (seat.center[1] + seat.size[1]) < 0.2
+
+
+def test_distance_attribute_is_the_rendered_one():
+    clip = walk_clip(60)
+    person = PersonSpec(clip.name, 0, BodyStyle(), View('towards', 1.3, 1.2), 1)
+    ren = BagRenderer(BagSpec('w', (person,), 40, 'empty', 'none', 'kinect_v2', 3, {}),
+                      {clip.name: clip})
+    pel = ren.joints[0][:, J['pelvis']]
+    assert -pel[:, 2].max() == pytest.approx(NEAREST_M)  # pushed back to stop 1 m away
+    assert ren.attributes()['distance_m'] == pytest.approx(-pel[:, 2].mean(), abs=0.006)
+    assert ren.attributes()['distance_m'] > 1.3

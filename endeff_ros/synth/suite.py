@@ -359,6 +359,8 @@ class BagRenderer:
         """The bag's attributes (valid after ``frames()`` ran to the end)."""
         out = dict(self.spec.attributes)
         out['view'] = self.view_kind
+        # As rendered: an approaching walk may have been pushed back to stop before the camera.
+        out['distance_m'] = round(-float(self.joints[0][:, _J['pelvis'], 2].mean()), 2)
         out['truncated'] = self.truncated
         out['clutter'] = list(self.clutter)
         return out
