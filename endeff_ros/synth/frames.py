@@ -52,9 +52,14 @@ class SynthFrame:
 
 def dropped_frames(name: str, n: int, seed: int = 0) -> tuple[set[int], set[int]]:
     """(dropped colour indices, dropped depth indices) of an ``n``-frame sequence."""
+    return drop_indices(np.random.default_rng([seed, SEQUENCES.index(name), 2]), n)
+
+
+def drop_indices(rng: np.random.Generator, n: int) -> tuple[set[int], set[int]]:
+    """(dropped colour indices, dropped depth indices) of ``n`` frames drawn from ``rng``:
+    ``DROP_RATE`` of each (at least one), never among the first 3 frames, none if n <= 4."""
     if n <= 4:
         return set(), set()
-    rng = np.random.default_rng([seed, SEQUENCES.index(name), 2])
     k = max(1, int(round(DROP_RATE * n)))
     cand = rng.permutation(np.arange(3, n))
     return {int(i) for i in cand[:k]}, {int(i) for i in cand[k:2 * k]}

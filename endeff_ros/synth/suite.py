@@ -28,7 +28,14 @@ import numpy.typing as npt
 
 from ..attributes import ATTRIBUTES_KEY
 from .body import Entity, merge
-from .frames import COLOR_JITTER_NS, DROP_RATE, PERIOD_NS, T0_NS, SynthFrame, sensed_visibility
+from .frames import (
+    COLOR_JITTER_NS,
+    PERIOD_NS,
+    T0_NS,
+    SynthFrame,
+    drop_indices,
+    sensed_visibility,
+)
 from .mocap.clip import JOINT_INDEX, MotionClip
 from .render import Camera, render, static_layer
 from .room import BUILDERS, background_entity, scatter
@@ -330,7 +337,7 @@ class BagRenderer:
     def frames(self) -> Iterator[SynthFrame]:
         spec, intr = self.spec, self.model.intrinsics
         n = spec.frames
-        drop_c, drop_d = dropped(spec.seed, n)
+        drop_c, drop_d = drop_indices(np.random.default_rng([spec.seed, 2]), n)
         jit = np.random.default_rng([spec.seed, 4]).integers(
             -COLOR_JITTER_NS, COLOR_JITTER_NS + 1, size=n)
         for i in range(n):
@@ -374,17 +381,6 @@ class BagRenderer:
                 'wall_z_m': round(cam.wall_z, 2), 'seed': self.spec.seed,
                 'people': [{'clip': p.clip, 'start_frame': p.start, 'body': p.body.label,
                             'view': asdict(p.view)} for p in self.spec.people]}
-
-
-def dropped(seed: int, n: int) -> tuple[set[int], set[int]]:
-    """(dropped colour indices, dropped depth indices) of an ``n``-frame bag, as the paper
-    suite: about 2 % of each, at least one, never among the first 3 frames."""
-    if n <= 4:
-        return set(), set()
-    rng = np.random.default_rng([seed, 2])
-    k = max(1, int(round(DROP_RATE * n)))
-    cand = rng.permutation(np.arange(3, n))
-    return {int(i) for i in cand[:k]}, {int(i) for i in cand[k:2 * k]}
 
 
 def write_bag(spec: BagSpec, clips: dict[str, MotionClip], out: Path,
