@@ -166,3 +166,13 @@ def test_visible_ground_truth_lies_just_behind_the_depth_surface(sensor):
             assert -0.02 < gap < 0.12
             checked += 1
     assert checked >= 6
+
+
+def test_a_sit_clip_that_does_not_sit_gets_no_chair():
+    from endeff_ros.synth.mocap.clip import MotionClip
+
+    walk = walk_clip(60)
+    perch = MotionClip('perch', 'procedural', 'sit', 'dev', 30.0, walk.positions)
+    specs = suite_specs([perch, sit_clip(60, split='test')], quick=True)
+    assert all(s.interaction != 'sit' for s in specs if s.people[0].clip == 'perch')
+    assert all(s.interaction == 'sit' for s in specs if s.people[0].clip == 'proc_sit')
