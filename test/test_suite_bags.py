@@ -176,3 +176,27 @@ def test_a_sit_clip_that_does_not_sit_gets_no_chair():
     specs = suite_specs([perch, sit_clip(60, split='test')], quick=True)
     assert all(s.interaction != 'sit' for s in specs if s.people[0].clip == 'perch')
     assert all(s.interaction == 'sit' for s in specs if s.people[0].clip == 'proc_sit')
+
+
+def _cli_args(**kw):
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    synth_cli.add_arguments(parser)
+    argv = ['--suite', 'mocap', '--quick']
+    for k, v in kw.items():
+        argv += [f'--{k}'] if v is True else [f'--{k}', str(v)]
+    return parser.parse_args(argv)
+
+
+def test_cli_lists_and_reports_a_failed_bag(tmp_path, capsys):
+    assert synth_cli.run(_cli_args(list=True, only='test__*')) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1].startswith('24 bags') and all(line.startswith('test__') for line in out[:-1])
+    blocked = tmp_path / 'out'
+    (blocked / 'mcap').parent.mkdir()
+    (blocked / 'mcap').write_text('not a folder')
+    assert synth_cli.run(_cli_args(out=blocked, only='*__000-*', jobs=1)) == 1
+    err = capsys.readouterr().err
+    assert '__000-' in err and 'failed' in err
+    assert synth_cli.run(_cli_args(list=True, only='nothing*')) == 2

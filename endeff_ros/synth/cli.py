@@ -149,9 +149,13 @@ def run_mocap(args: argparse.Namespace, storages: list[str]) -> int:
     t0 = time.monotonic()
     jobs = max(1, min(args.jobs or os.cpu_count() or 1, len(specs)))
     results: dict[str, dict] = {}
+    failed: dict[str, str] = {}
     if jobs == 1:
         for s in specs:
-            results[s.name] = _mocap_one(s, byname, args.out, storages)
+            try:
+                results[s.name] = _mocap_one(s, byname, args.out, storages)
+            except (OSError, ValueError, KeyError) as exc:
+                failed[s.name] = f'{type(exc).__name__}: {exc}'
     else:
         order = sorted(specs, key=lambda s: -s.frames * len(s.people))
         with ProcessPoolExecutor(jobs, mp_context=get_context('spawn')) as pool:
@@ -159,14 +163,20 @@ def run_mocap(args: argparse.Namespace, storages: list[str]) -> int:
             for s in order:
                 need = {p.clip: byname[p.clip] for p in s.people}
                 futs[s.name] = pool.submit(_mocap_one, s, need, args.out, storages)
-            results = {s.name: futs[s.name].result() for s in specs}
+            for s in specs:
+                try:
+                    results[s.name] = futs[s.name].result()
+                except (OSError, ValueError, KeyError) as exc:
+                    failed[s.name] = f'{type(exc).__name__}: {exc}'
     dt = time.monotonic() - t0
     total = sum(r['frames'] for r in results.values())
     for name, r in results.items():
         print(f"{name}: {r['frames']} frames, truncated={r['truncated']}")
     print(f'wrote {len(results)} mocap bags ({total} frames) x {len(storages)} storage(s) to '
           f'{args.out} in {dt:.1f} s')
-    return 0
+    for name, why in failed.items():
+        print(f'endeff synth: bag {name} failed: {why}', file=sys.stderr)
+    return 1 if failed else 0
 
 
 def run(args: argparse.Namespace) -> int:
