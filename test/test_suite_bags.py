@@ -200,3 +200,17 @@ def test_cli_lists_and_reports_a_failed_bag(tmp_path, capsys):
     err = capsys.readouterr().err
     assert '__000-' in err and 'failed' in err
     assert synth_cli.run(_cli_args(list=True, only='nothing*')) == 2
+
+
+def test_bad_spec_is_a_clear_error():
+    from endeff_ros.synth.skeleton_body import BodyStyle
+    from endeff_ros.synth.suite import BagSpec, PersonSpec
+    from endeff_ros.synth.views import View
+
+    person = PersonSpec('proc_wave', 0, BodyStyle(), View('front', 2.0, 1.2), 1)
+    with pytest.raises(ValueError, match="sensor must be one of .*'kinect_v3'"):
+        BagSpec('x', (person,), 5, 'empty', 'none', 'kinect_v3', 1)
+    with pytest.raises(ValueError, match='room must be'):
+        BagSpec('x', (person,), 5, 'garden', 'none', 'd435', 1)
+    with pytest.raises(KeyError, match='proc_wave'):
+        BagRenderer(BagSpec('x', (person,), 5, 'empty', 'none', 'd435', 1), {})

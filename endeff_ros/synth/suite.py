@@ -8,8 +8,8 @@ attributes in the rosbag2 metadata (``custom_data``, key ``attributes.ATTRIBUTES
 Bag names are ``<split>__<clip>__<nnn>-<view>-<sensor>-<room>-p<people>`` so that a split or
 a sensor can be picked by glob (``dev__*``, ``*-d435-*``).
 
-Recipes cycle over views, sensors, rooms and people with a period prime to the number of
-clips' positions, so every combination is spread over clips and splits; the random parts
+Views, sensors, rooms and people cycle with the bag's index (periods 5, 6, 7 and 8, shifted on
+each pass over the clips), so the combinations spread over clips and splits; the random parts
 (height, build, clothing, distance, camera height, tilt, roll) come from a generator seeded by
 the suite seed and the bag's index, so a spec never depends on which other bags are selected.
 """
@@ -38,7 +38,7 @@ from .frames import (
 )
 from .mocap.clip import JOINT_INDEX, MotionClip
 from .render import Camera, render, static_layer
-from .room import BUILDERS, background_entity, scatter
+from .room import BUILDERS, ROOMS, background_entity, scatter
 from .sensor import color_image, depth_to_mm
 from .sensors import SENSORS, sensor_depth
 from .skeleton_body import BodyStyle, build_body, carry_pose, scale_to_height, standing_height
@@ -52,7 +52,7 @@ DETAILS_KEY = 'endeff.details'
 INTERACTIONS = ('none', 'occluder', 'sit', 'table', 'carry')
 _J = JOINT_INDEX
 
-# Recipe cycles (lengths 5, 6, 7, 8 are pairwise near-prime, so index i meets every mix).
+# The cycles (see the module docstring).
 _VIEWS = ('front', 'side', 'back', 'across', 'towards')
 _SENSORS = ('kinect_v1', 'azure_nfov', 'd435', 'kinect_v2', 'xtion', 'd455')
 _ROOMS = ('empty', 'furnished', 'wall', 'furnished', 'empty', 'wall', 'furnished')
@@ -88,6 +88,23 @@ class BagSpec:
     sensor: str
     seed: int
     attributes: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        problems = []
+        if not self.people:
+            problems.append('no people')
+        if self.frames < 1:
+            problems.append(f'frames must be >= 1, got {self.frames}')
+        if self.room not in ROOMS:
+            problems.append(f'room must be one of {ROOMS}, got {self.room!r}')
+        if self.interaction not in INTERACTIONS:
+            problems.append(f'interaction must be one of {INTERACTIONS}, got '
+                            f'{self.interaction!r}')
+        if self.sensor not in SENSORS:
+            problems.append(f'sensor must be one of {sorted(SENSORS)}, got {self.sensor!r}')
+        if problems:
+            msg = f'bag spec {self.name!r}: ' + '; '.join(problems)
+            raise ValueError(msg)
 
 
 def resampled(clip: MotionClip) -> npt.NDArray[np.float64]:
