@@ -55,7 +55,7 @@ def _skeleton(pelvis: npt.NDArray, lean: npt.NDArray, hip: tuple[npt.NDArray, np
         pos[:, _J[pre + 'shoulder']], pos[:, _J[pre + 'elbow']] = sh, el
         pos[:, _J[pre + 'wrist']], pos[:, _J[pre + 'hand_end']] = wr, wr + 0.18 * d2
     feet = [_J[n] for n in ('l_ankle', 'l_toe', 'r_ankle', 'r_toe')]
-    pos[..., 1] -= pos[:, feet, 1].min() - 0.0
+    pos[..., 1] -= pos[:, feet, 1].min()  # lowest foot joint of the clip on the floor
     pos[..., [0, 2]] -= pos[0, _J['pelvis'], [0, 2]]
     return pos
 
@@ -80,8 +80,9 @@ def sit_clip(n: int = 60, name: str = 'proc_sit', split: str = 'dev') -> MotionC
     s = np.clip(np.arange(n) / max(n - 1, 1) * 1.5 - 0.2, 0, 1)
     s = s * s * (3 - 2 * s)
     flex = s * np.pi / 2
-    pelvis = np.stack([np.zeros(n), 0.95 - 0.43 * s, -0.43 * np.sin(flex) + 0.0 * s], axis=1)
-    pelvis[:, 2] += 0.43 * s  # keep the knees above the feet
+    # The pelvis moves back by the thigh's horizontal reach as it lowers, so the knees stay
+    # above the planted feet (shins vertical).
+    pelvis = np.stack([np.zeros(n), 0.95 - 0.43 * s, -0.43 * np.sin(flex)], axis=1)
     hip = (flex, flex)
     knee = (flex, flex)
     zero = np.zeros(n)
