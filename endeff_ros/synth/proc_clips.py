@@ -81,8 +81,9 @@ def sit_clip(n: int = 60, name: str = 'proc_sit', split: str = 'dev') -> MotionC
     s = s * s * (3 - 2 * s)
     flex = s * np.pi / 2
     # The pelvis moves back by the thigh's horizontal reach as it lowers, so the knees stay
-    # above the planted feet (shins vertical).
-    pelvis = np.stack([np.zeros(n), 0.95 - 0.43 * s, -0.43 * np.sin(flex)], axis=1)
+    # above the planted feet (shins vertical), and lowers by what the thighs lose in height.
+    pelvis = np.stack([np.zeros(n), 0.95 - 0.43 * (1 - np.cos(flex)), -0.43 * np.sin(flex)],
+                      axis=1)
     hip = (flex, flex)
     knee = (flex, flex)
     zero = np.zeros(n)
