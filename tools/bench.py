@@ -5,7 +5,9 @@
   ``stages_ms``. Optical flow is not included.
 - ``full_pipeline_ms``: the predict-update :class:`Tracker` per 640x480 frame of a synthetic
   sequence, optical flow included (``full_stages_ms`` per stage).
-- optional: ``flow`` (optical-flow methods table), ``process`` (offline bag throughput),
+- optional: ``flow`` (optical-flow methods table), ``process`` (offline bag throughput; its
+  ``whole_command`` times ``endeff process`` end to end on a 300-frame bag on the same core,
+  with ``ratio_to_full_pipeline``: its frames/s over those the full-pipeline median allows),
   ``ros`` (end-to-end DDS latency against a relay node).
 
 Everything runs on one core: the process pins itself to a single CPU and OpenCV to one thread,
@@ -151,10 +153,15 @@ def run(args: argparse.Namespace) -> int:
 
         out['flow'] = flow_benchmark()
     if args.process:
-        from tools.bench_process import bench_process
+        from tools.bench_process import bench_process, whole_command
 
         with _all_cores():  # N bags on N processes: the one-core pin must not be inherited
             out['process'] = bench_process()
+        whole = whole_command(cpu=cpu)
+        # What the full pipeline's median allows, and the share of it the command reaches.
+        whole['ratio_to_full_pipeline'] = round(
+            whole['fps'] * out['full_pipeline_ms']['median'] / 1000.0, 3)
+        out['process']['whole_command'] = whole
     if args.ros:
         from tools.latency_bench import benchmark as ros_benchmark
 

@@ -58,8 +58,15 @@ def _boxes_frames(n: int, width: int = 640, height: int = 480
         yield START_NS + i * PERIOD_NS, color.astype(np.uint8), depth
 
 
+def _looped(frames: list[tuple[int, Any, Any]], n: int) -> list[tuple[int, Any, Any]]:
+    """``frames`` repeated (stamps continuing at the same period) up to ``n`` frames."""
+    period = frames[1][0] - frames[0][0] if len(frames) > 1 else 33_333_334
+    return [(frames[0][0] + k * period, *frames[k % len(frames)][1:]) for k in range(n)]
+
+
 def _source_frames(n: int) -> tuple[str, list[tuple[int, Any, Any]], Any]:
-    """(description, [(stamp, colour RGB, depth m)], intrinsics) of ``n`` 640x480 frames."""
+    """(description, [(stamp, colour RGB, depth m)], intrinsics) of ``n`` 640x480 frames (the
+    synthetic sequence is looped when ``n`` is longer)."""
     from endeff_ros.core.types import KINECT_640
 
     try:
@@ -75,7 +82,7 @@ def _source_frames(n: int) -> tuple[str, list[tuple[int, Any, Any]], Any]:
             frames.append((f.stamp_ns, f.color, f.depth))
             intr = f.intrinsics
         if len(frames) >= min(n, 10) and intr is not None:
-            return f'synth jumping_jacks ({len(frames)} frames)', frames, intr
+            return f'synth jumping_jacks ({len(frames)} frames, looped)', _looped(frames, n), intr
     except ImportError:
         pass
     intr = KINECT_640
@@ -166,6 +173,32 @@ def _run_child(inputs: list[Path], output: Path, jobs: int, cpus: list[int]) -> 
     out = subprocess.run([sys.executable, '-c', code, arg], env=env, check=True,
                          capture_output=True, text=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def whole_command(*, frames: int = 300, repeats: int = 3, cpu: int | None = None,
+                  storage: str = 'mcap', workdir: str | Path | None = None) -> dict[str, Any]:
+    """Wall time of the whole ``endeff process`` command (interpreter start, imports, reading,
+    tracking, writing) on one ``frames``-frame bag, pinned to one CPU; median of ``repeats``."""
+    cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else [0]
+    cpu = cpus[-1] if cpu is None else cpu
+    env = dict(os.environ)
+    env.update({k: '1' for k in THREAD_VARS})
+    with tempfile.TemporaryDirectory(dir=workdir) as tmp:
+        root = Path(tmp)
+        source, data, intr = _source_frames(frames)
+        write_input_bag(root / 'in', data, intr, storage)
+        seconds = []
+        for k in range(repeats):
+            cmd = [sys.executable, '-m', 'endeff_ros.cli', 'process', str(root / 'in'), '-o',
+                   str(root / f'out{k}')]
+            t0 = time.perf_counter()
+            subprocess.run(cmd, env=env, check=True, capture_output=True,
+                           preexec_fn=lambda: os.sched_setaffinity(0, {cpu}))
+            seconds.append(time.perf_counter() - t0)
+    median = float(np.median(seconds))
+    return {'source': source, 'frames': len(data), 'cpu': cpu,
+            'seconds': [round(s, 3) for s in seconds], 'median_s': round(median, 3),
+            'fps': round(len(data) / median, 2)}
 
 
 def bench_process(*, frames: int = 30, bags: int = 2, storage: str = 'mcap',
