@@ -1,6 +1,6 @@
 """``endeff eval``: score the temporal and the single-frame estimator on benchmark bags.
 
-Every bag in the benchmark-bag form (``/work/shared/spec/benchmark-bags.md``), written by anyone,
+Every bag in the benchmark-bag form (``docs/benchmark-bags.md``), written by anyone,
 is scored: frames are read and synchronised by :mod:`endeff_ros.bag.reader`, each frame goes to
 the temporal :class:`~endeff_ros.core.tracker.Tracker` and to the single-frame
 :func:`~endeff_ros.core.single_frame.estimate_frame` in the same run, and both are scored with

@@ -1,4 +1,4 @@
-"""Synthetic benchmark data (issue 3): bags read back with rosbags, ground truth, determinism.
+"""Synthetic benchmark data: bags read back with rosbags, ground truth, determinism.
 
 The quick bags are generated once per session into a temporary directory (never committed).
 """

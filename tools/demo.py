@@ -7,7 +7,7 @@ For each bag in ``DIR/mcap`` (else ``DIR/sqlite3``, else the bags under ``DIR``)
 DDS in lock-step (original stamps, jittered colour/depth send times; every depth image is sent
 once the node answered the previous one, so every frame is processed as offline), and the
 ``end_effectors`` clouds are scored against the bag's ground truth (Section 6.1, per
-``shared/spec/benchmark-bags.md``). The same run also evaluates the bag offline with both the
+``docs/benchmark-bags.md``). The same run also evaluates the bag offline with both the
 temporal and the single-frame estimator (``endeff eval``), so the table shows the node's scores
 next to the offline ones and the single-frame baseline.
 """

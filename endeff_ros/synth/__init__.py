@@ -1,8 +1,8 @@
-"""Synthetic RGB-D benchmark sequences with ground-truth end-effectors (issue 3).
+"""Synthetic RGB-D benchmark sequences with ground-truth end-effectors.
 
 ``render_sequence(name)`` yields ``SynthFrame`` objects (depth, colour, intrinsics, ground truth)
 without touching any bag; ``endeff synth`` writes them as rosbag2 bags in the form of
-``shared/spec/benchmark-bags.md`` and ``endeff sheet`` draws a contact sheet of such bags.
+``docs/benchmark-bags.md`` and ``endeff sheet`` draws a contact sheet of such bags.
 This package never imports rclpy.
 """
 

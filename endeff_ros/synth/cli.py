@@ -1,7 +1,7 @@
 """``endeff synth``: generate the synthetic benchmark bags.
 
 Writes ``OUT/mcap/<sequence>/`` and/or ``OUT/sqlite3/<sequence>/`` (rosbag2, ROS 2 Jazzy
-messages, form of ``shared/spec/benchmark-bags.md``). Sequences are generated in parallel
+messages, form of ``docs/benchmark-bags.md``). Sequences are generated in parallel
 worker processes (one per core, at most one per sequence).
 
 Two suites: ``paper`` (default; the procedural sequences, unchanged) and ``mocap`` (motion

@@ -1,4 +1,4 @@
-"""Write synthetic frames as rosbag2 bags in the form of ``shared/spec/benchmark-bags.md``.
+"""Write synthetic frames as rosbag2 bags in the form of ``docs/benchmark-bags.md``.
 
 Uses rosbags' ``Writer`` and the ROS 2 Jazzy typestore (no rclpy). One call writes the same
 frames to one or more storages (``sqlite3``, ``mcap``). Log (receive) times are the header
