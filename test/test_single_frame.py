@@ -87,6 +87,9 @@ rotate_about_camera = shapes.rotate_about_camera
 # ---------------------------------------------------------------------------------------------
 
 CAMERA_HEIGHT = {'chair': 0.4}  # chair: low camera, so the seat hides no leg (see shapes.chair)
+#: The robot arm stands far enough for its pedestal's foot to stay clear of the image's bottom
+#: border (closer, the foot would be where the border cuts the pedestal: no end).
+ARM_Z = 2.6
 
 
 def _optical(p, camera_height):
@@ -119,7 +122,7 @@ def _chair_root_ok(root, yaw, z=2.4, camera_height=0.4):
     return outside, 1e-9
 
 
-def _arm_root_ok(root, camera_height=1.1, z=2.4):
+def _arm_root_ok(root, camera_height=1.1, z=ARM_Z):
     base = np.array([-0.3, 0.0, z])
     joints = [base + [0, 0.03, 0], base + [0, 0.6, 0], base + [0.35, 0.95, 0],
               base + [0.75, 0.85, 0], base + [0.95, 0.55, 0]]
@@ -136,7 +139,7 @@ def _make(kind, arg, seed):
         return shapes.person(arg, seed=seed)
     if kind == 'chair':
         return shapes.chair(yaw=arg, seed=seed)
-    return shapes.robot_arm(seed=seed)
+    return shapes.robot_arm(z=ARM_Z, seed=seed)
 
 
 @functools.cache
@@ -847,3 +850,24 @@ def test_candidates_carry_consistent_geodesics():
         assert c.geodesic >= np.linalg.norm(c.path[0] - c.path[-1]) - 1e-9
         assert c.geodesic >= c.protrusion - 1e-9
         assert c.protrusion >= EndeffParams().chain_geodesic
+
+
+def test_an_end_cut_by_the_image_border_is_no_end_effector():
+    """A star pushed to the right so that one limb leaves the image: the limb's stump at the
+    border is where the view cuts the body, not an end; the other limbs' tips are found."""
+    scene = shapes.star(5, z=2.5)
+    depth, tips = shapes.render(scene, camera_height=1.1)
+    shift = 240  # pixels: the limb pointing right (limb 0, 0.3 rad off horizontal) leaves
+    moved = np.full_like(depth, np.nan)
+    moved[:, shift:] = depth[:, :-shift]
+    z = tips[:, 2]
+    tips = tips + np.stack([shift * z / shapes.K640.fx, 0 * z, 0 * z], axis=1)
+    inside = shapes.K640.project(tips)[:, 0] < shapes.K640.width - 10
+    assert inside.sum() == 4  # premise: exactly one tip left the image
+    kept = estimate_frame(frame(moved), EndeffParams()).positions()
+    kept_all = estimate_frame(frame(moved), EndeffParams(drop_cut_ends=False)).positions()
+    dropped = [p for p in kept_all if not any(np.allclose(p, q) for q in kept)]
+    assert len(dropped) == 1 and len(kept) == len(kept_all) - 1
+    assert shapes.K640.project(dropped[0][None])[0, 0] > shapes.K640.width - 10  # the stump
+    rows, cols, dist = match(tips[inside], kept)
+    assert len(rows) == 4 and np.all(dist < 0.05), dist

@@ -91,6 +91,11 @@ class EndeffParams:
                              'the found paths (a chain, not one long edge of a broad surface).',
                              lo=1, hi=100)
     max_end_effectors: int = _p(12, 'Upper bound on end-effectors per entity.', lo=1, hi=100)
+    drop_cut_ends: bool = _p(True, 'Drop an end-effector whose sub-band reaches the image border '
+                             '(within cut_margin_px) or the foreground box (within one voxel): '
+                             'it is where the view or the box cuts the body, not an end.')
+    cut_margin_px: int = _p(3, 'How close (pixels) to the image border a sub-band counts as '
+                            'cut by it.', unit='px', lo=0, hi=100)
     tip_depth: float = _p(0.1, 'An end-effector is the centroid of its branch within this '
                           'geodesic depth of the extreme.', unit='m', lo=0.0, hi=1.0)
 

@@ -21,7 +21,7 @@ from .bands import (
 from .cloud import FloorPlane, foreground_cloud
 from .graph import TopologyGraph, approximate_geodesic, build_graph, find_end_effectors, geodesic
 from .params import EndeffParams
-from .types import Candidate, RGBDFrame
+from .types import Candidate, Intrinsics, RGBDFrame
 
 if TYPE_CHECKING:
     import numpy.typing as npt
@@ -77,7 +77,40 @@ def estimate_frame(frame: RGBDFrame, params: EndeffParams | None = None, *,
     points, floor = foreground_cloud(frame.depth, frame.intrinsics, params, floor=floor)
     timer.lap('cloud')
     estimate = estimate_points(points, params, timer=timer)
+    if params.drop_cut_ends:
+        estimate = drop_cut_ends(estimate, frame.intrinsics, params)
     return dataclasses.replace(estimate, floor=floor)
+
+
+def cut_nodes(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
+              intrinsics: Intrinsics, params: EndeffParams) -> npt.NDArray[np.intp]:
+    """Sub-bands (graph nodes) cut by the view or by the foreground box: those with a point
+    projecting within ``cut_margin_px`` of the image border, or lying within one voxel of a
+    face of the box. A body that leaves the image (or the box) ends there, so its farthest
+    sub-band is an extreme of the graph although it is no end of the body."""
+    z = np.maximum(points[:, 2], 1e-6)
+    u = intrinsics.fx * points[:, 0] / z + intrinsics.cx
+    v = intrinsics.fy * points[:, 1] / z + intrinsics.cy
+    m = params.cut_margin_px
+    near = ((u < m) | (u > intrinsics.width - 1 - m) | (v < m)
+            | (v > intrinsics.height - 1 - m))
+    s = max(params.voxel_size, 0.01)
+    for k, axis in enumerate('xyz'):
+        lo, hi = getattr(params, f'box_min_{axis}'), getattr(params, f'box_max_{axis}')
+        near |= (points[:, k] < lo + s) | (points[:, k] > hi - s)
+    return np.unique(subband[near & (subband >= 0)])
+
+
+def drop_cut_ends(estimate: FrameEstimate, intrinsics: Intrinsics,
+                  params: EndeffParams) -> FrameEstimate:
+    """``estimate`` without the candidates whose sub-band is cut (:func:`cut_nodes`)."""
+    cut = cut_nodes(estimate.points, estimate.subband, intrinsics, params)
+    if not cut.size or not any(e.candidates for e in estimate.entities):
+        return estimate
+    entities = [dataclasses.replace(e, candidates=[c for c in e.candidates
+                                                   if not np.isin(c.node, cut)])
+                for e in estimate.entities]
+    return dataclasses.replace(estimate, entities=entities)
 
 
 def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None = None, *,
