@@ -29,8 +29,7 @@ import os
 import sys
 import time
 import traceback
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -45,8 +44,8 @@ from endeff_ros.bag.reader import (
     ReaderOptions,
     add_reader_arguments,
     bag_name,
-    cpus,
     find_bags,
+    options_for_workers,
     options_from_args,
 )
 from endeff_ros.cli_common import load_params_option
@@ -551,22 +550,13 @@ def evaluate_bags(paths: Sequence[str | Path], *, params: EndeffParams | None = 
             failed.append((str(arg), str(err)))
     names = _unique_names(bags)
     workers = min(jobs, len(bags))
-    if workers >= cpus():  # every core evaluates: no spare one for reading ahead
-        options = replace(options, prefetch=False)
+    options = options_for_workers(options, workers)
     job_list = [(p, n, params, options, estimate_fn, tracker_factory)
                 for p, n in zip(bags, names, strict=True)]
     total = prog.count_frames(bags, options) if sys.stderr.isatty() else 0
     with prog.progress_bar(total, desc='endeff eval') as bar:
         if workers > 1:
-            counter = prog.shared_counter()
-            with ProcessPoolExecutor(max_workers=workers, initializer=prog.init_worker,
-                                     initargs=(counter,)) as pool:
-                futures = [pool.submit(_eval_job, j) for j in job_list]
-                pending = set(futures)
-                while pending:
-                    _, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-                    bar.update_to(counter.value)
-                outcomes = [f.result() for f in futures]
+            outcomes = prog.map_in_workers(_eval_job, job_list, workers, bar)
         else:
             outcomes = [_eval_job(j, bar.update) for j in job_list]
     results = [o for o in outcomes if isinstance(o, SequenceResult)]

@@ -43,8 +43,7 @@ import sqlite3
 import sys
 import time
 import traceback
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
@@ -72,8 +71,8 @@ from .reader import (
     ReaderOptions,
     add_reader_arguments,
     bag_name,
-    cpus,
     find_bags,
+    options_for_workers,
     options_from_args,
     typestore,
 )
@@ -390,10 +389,8 @@ def process_bags(inputs: Sequence[str | Path], output: str | Path, *, jobs: int 
     if len(inputs) > 1:
         Path(output).mkdir(parents=True, exist_ok=True)
     workers = max(1, min(jobs or os.cpu_count() or 1, len(inputs)))
-    options = kwargs.get('options') or ReaderOptions()
-    if workers > 1 and options.prefetch is None:
-        # A reader thread per worker only helps while cores are left over.
-        kwargs = {**kwargs, 'options': replace(options, prefetch=workers < cpus())}
+    kwargs = {**kwargs, 'options': options_for_workers(kwargs.get('options') or ReaderOptions(),
+                                                       workers)}
     job_list = [(Path(i), o, kwargs) for i, o in zip(inputs, outs, strict=True)]
     enabled = sys.stderr.isatty() if show_progress is None else show_progress
     total = prog.count_frames([j[0] for j in job_list], kwargs.get('options')) \
@@ -414,32 +411,24 @@ def _serial_job(job: tuple[Any, ...], progress: Callable[[int], None]) -> Proces
         return ProcessResult(str(in_path), str(out_path), error=f'{in_path}: {err}')
 
 
+def _stop_workers() -> None:
+    """Interrupted: stop the workers (their SIGTERM handler unwinds process_bag, which removes
+    its partial output)."""
+    for child in multiprocessing.active_children():
+        child.terminate()
+    for child in multiprocessing.active_children():
+        child.join(5.0)
+
+
 def _parallel(job_list: list[tuple[Any, ...]], workers: int, bar: prog.ProgressBar,
               outs: list[Path]) -> list[ProcessResult]:
-    ctx = multiprocessing.get_context()
-    counter = prog.shared_counter(ctx)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
-                               initargs=(counter,))
     try:
-        futures: list[Future[ProcessResult]] = [pool.submit(_job, j) for j in job_list]
-        pending = set(futures)
-        while pending:
-            _, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-            bar.update_to(counter.value)
-        bar.update_to(counter.value)
+        return prog.map_in_workers(_job, job_list, workers, bar, initializer=_init_worker,
+                                   on_interrupt=_stop_workers)
     except BaseException:
-        # Interrupted: stop the workers (their SIGTERM handler unwinds process_bag, which
-        # removes its partial output), then sweep what a worker killed too early left.
-        for child in multiprocessing.active_children():
-            child.terminate()
-        for child in multiprocessing.active_children():
-            child.join(5.0)
-        pool.shutdown(wait=False, cancel_futures=True)
-        for o in outs:
+        for o in outs:  # what a worker killed too early left
             sweep_stale_partials(o)
         raise
-    pool.shutdown()
-    return [f.result() for f in futures]
 
 
 class _Interrupted(KeyboardInterrupt):

@@ -9,6 +9,7 @@ processes is counted in one shared integer (:func:`shared_counter`, :func:`init_
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -109,3 +110,34 @@ def report(n: int = 1) -> None:
     if _COUNTER is not None:
         with _COUNTER.get_lock():
             _COUNTER.value += n
+
+
+def map_in_workers(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int,
+                   bar: ProgressBar, *, initializer: Callable[[Any], None] = init_worker,
+                   on_interrupt: Callable[[], None] | None = None) -> list[Any]:
+    """``[fn(job) for job in jobs]`` on ``workers`` processes, in job order, while ``bar``
+    follows the frames the workers :func:`report`. ``initializer(counter)`` sets a worker up
+    (it must call :func:`init_worker`). On any exception (an interrupt) ``on_interrupt()``
+    runs first (e.g. to stop the workers), then the pool is dropped and the exception goes on.
+    """
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    ctx = multiprocessing.get_context()
+    counter = shared_counter(ctx)
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=initializer,
+                               initargs=(counter,))
+    try:
+        futures = [pool.submit(fn, j) for j in jobs]
+        pending = set(futures)
+        while pending:
+            _, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+            bar.update_to(counter.value)
+        bar.update_to(counter.value)
+    except BaseException:
+        if on_interrupt is not None:
+            on_interrupt()
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
+    return [f.result() for f in futures]

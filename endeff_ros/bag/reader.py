@@ -28,6 +28,7 @@ deserialising and decoding run on a background thread ahead of the caller (``pre
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import heapq
 import itertools
@@ -35,7 +36,7 @@ import os
 import queue
 import sys
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -436,8 +437,9 @@ class BagReader:
 
     def frames(self) -> Iterator[tuple[RGBDFrame, npt.NDArray[np.float64] | None]]:
         """Yield ``(frame, gt_positions or None)`` per synchronised frame, in stamp order."""
-        for rec in self.records():
-            yield rec.frame, rec.gt
+        with contextlib.closing(self.records()) as records:
+            for rec in records:
+                yield rec.frame, rec.gt
 
     def records(self, *, ground_truth: bool = True) -> Iterator[BagRecord]:
         """Yield a :class:`BagRecord` per frame; raises :class:`BagError` on bad data.
@@ -521,12 +523,15 @@ class BagReader:
         if prefetch or (prefetch is None and cpus() > 1):
             source = self._prefetched(source, {sel.color: convert.any_color_to_array,
                                                sel.depth: convert.any_depth_to_array})
-        for entry in source:
-            stats.messages[entry.topic] += 1
-            i = index[entry.topic]
-            if i == 2:
-                last_info = entry.msg
-            yield from emit(sync.add(i, entry.stamp, entry if i < 2 else entry.msg))
+        # Closed explicitly, so that leaving early (close, exception) stops a reader thread at
+        # once rather than whenever the generator is garbage-collected.
+        with contextlib.closing(source):
+            for entry in source:
+                stats.messages[entry.topic] += 1
+                i = index[entry.topic]
+                if i == 2:
+                    last_info = entry.msg
+                yield from emit(sync.add(i, entry.stamp, entry if i < 2 else entry.msg))
         sync.flush()
         yield from emit([])
         if stats.messages[sel.info] == 0:
@@ -698,6 +703,14 @@ def cpus() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         return os.cpu_count() or 1
+
+
+def options_for_workers(options: ReaderOptions, workers: int) -> ReaderOptions:
+    """``options`` for each of ``workers`` processes reading bags at once: a reader thread
+    per worker only helps while cores are left over (an explicit ``prefetch`` is kept)."""
+    if workers > 1 and options.prefetch is None:
+        return replace(options, prefetch=workers < cpus())
+    return options
 
 
 def resolve_bag(path: Path) -> Path:
