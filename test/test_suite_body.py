@@ -20,7 +20,7 @@ from endeff_ros.synth.skeleton_body import (
     standing_height,
 )
 from endeff_ros.synth.suite import BagRenderer, BagSpec, PersonSpec
-from endeff_ros.synth.views import NEAREST_M, View, aim_camera, effective_kind, facing, place
+from endeff_ros.synth.views import FARTHEST_M, NEAREST_M, View, aim_camera, effective_kind, facing, place
 
 
 def _inside(prim, pts: np.ndarray) -> np.ndarray:
@@ -200,9 +200,25 @@ def test_truncation_flag():
     cut = BagRenderer(_spec(1.9, 3.2), clips)  # right hand beyond the image's right border
     frames = list(cut.frames())
     assert cut.truncated
+    # Only the end-effectors in the field of view are listed: fewer than 5, all inside.
+    assert all(0 < len(f.gt) < 5 for f in frames)
     u = KINECT_640.project(frames[0].gt)[:, 0]
-    assert (u > KINECT_640.width).any() and (u < KINECT_640.width).any()
+    assert ((u >= 0) & (u <= KINECT_640.width - 1)).all()
+    assert len(frames[0].gt_ids) == len(frames[0].gt) == len(frames[0].gt_visible)
     assert cut.attributes()['truncated'] is True
+
+
+def test_people_stay_in_the_activity_area():
+    clip = walk_clip(150)
+    for kind, distance in (('front', 5.0), ('side', 3.9), ('towards', 3.5), ('back', 1.1)):
+        person = PersonSpec(clip.name, 0, BodyStyle(), View(kind, distance, 1.2), 1)
+        ren = BagRenderer(BagSpec('w', (person,), 90, 'empty', 'none', 'kinect_v2', 3, {}),
+                          {clip.name: clip})
+        depth = -ren.joints[0][:, J['pelvis'], 2]
+        if depth.max() - depth.min() <= FARTHEST_M - NEAREST_M:
+            assert depth.min() >= NEAREST_M - 1e-9 and depth.max() <= FARTHEST_M + 1e-9, kind
+        else:  # too long a walk to fit: it stops before the camera
+            assert depth.min() == pytest.approx(NEAREST_M), kind
 
 
 def test_sitting_gets_a_chair_under_the_pelvis():

@@ -42,7 +42,7 @@ from .room import BUILDERS, ROOMS, background_entity, scatter
 from .sensor import color_image, depth_to_mm
 from .sensors import SENSORS, sensor_depth
 from .skeleton_body import BodyStyle, build_body, carry_pose, scale_to_height, standing_height
-from .views import View, aim_camera, effective_kind, place
+from .views import FARTHEST_M, NEAREST_M, View, aim_camera, effective_kind, place
 
 FPS = 30.0
 QUICK_FRAMES = 24
@@ -136,6 +136,17 @@ def _window(pos: npt.NDArray[np.float64], n: int, mode: str) -> int:
     return int(np.argmax(c[n - 1:] - c[:t - n + 1]))
 
 
+def _approach_frames(seg: npt.NDArray[np.float64]) -> int:
+    """Frames of the walk ``seg`` (T, 22, 3) that an approach towards the camera keeps: those
+    before the pelvis has covered the activity area's depth (``FARTHEST_M - NEAREST_M``), so
+    that the walk starts inside the area; at least one second."""
+    pel = seg[:, _J['pelvis'], [0, 2]]
+    covered = np.linalg.norm(pel - pel[0], axis=1)
+    beyond = np.flatnonzero(covered > FARTHEST_M - NEAREST_M)
+    n = int(beyond[0]) if len(beyond) else len(seg)
+    return int(min(len(seg), max(n, round(FPS))))
+
+
 def _sits(pos: npt.NDArray[np.float64], n: int) -> bool:
     """Whether the sitting window of ``pos`` (T, 22, 3) brings the pelvis down to a chair's
     height: below 42 % of the standing height (standing: about 54 %, seated on a 0.46 m chair:
@@ -212,7 +223,7 @@ def _spec(i: int, clip: MotionClip, order: list[MotionClip], pos: dict, n: int, 
         interaction = ('table', 'occluder', 'none')[i % 3]
     else:
         interaction = 'carry' if (i % 11 == 4 and people == 1) else 'none'
-    far = min(5.0, sensor.z_max - 0.7)
+    far = min(FARTHEST_M, sensor.z_max - 0.7)
     dist = float(rng.uniform(1.2, far))
     cam_h = float(rng.uniform(0.6, 2.2))
     tilt = float(rng.uniform(-6.0, 6.0))
@@ -227,6 +238,8 @@ def _spec(i: int, clip: MotionClip, order: list[MotionClip], pos: dict, n: int, 
     first = PersonSpec(clip.name, _window(pos[clip.name], n, mode), _style(rng),
                        View(kind, round(dist, 2), round(cam_h, 2), round(tilt, 1),
                             round(roll, 1), round(off, 2), side), int(rng.integers(1000)))
+    if effective_kind(pos[clip.name][first.start:first.start + n], kind) == 'towards':
+        n = _approach_frames(pos[clip.name][first.start:first.start + n])
     persons = [first]
     pool = walkers or [c for c in order if c.split == clip.split] or order
     for k in range(1, people):
@@ -255,7 +268,8 @@ def _spec(i: int, clip: MotionClip, order: list[MotionClip], pos: dict, n: int, 
 
 class BagRenderer:
     """Renders one ``BagSpec``: ``frames()`` yields the ``SynthFrame``s in order; afterwards
-    ``truncated`` says whether any listed ground-truth point projected outside the image,
+    ``truncated`` says whether the ground truth of a person in view had a point outside the
+    image (not listed),
     ``furniture`` holds (kind, primitives) of each piece (scene frame), ``clutter`` their
     kinds, ``camera`` is the camera used."""
 
@@ -376,15 +390,17 @@ class BagRenderer:
             depth = np.where(mm > 0, mm.astype(np.float32) / np.float32(1000.0),
                              np.float32(np.nan))
             vis = sensed_visibility(ren, ent.gt_prims, depth)
-            gt = ren.gt[listed]
-            if len(gt):
-                uv = intr.project(gt)
-                out = ((gt[:, 2] <= 0) | (uv[:, 0] < 0) | (uv[:, 0] > intr.width - 1)
+            # Listed: the end-effectors in the field of view (projecting inside the image),
+            # hidden or not; one outside it cannot be seen by any image-based method.
+            if len(ren.gt):
+                uv = intr.project(ren.gt)
+                out = ((ren.gt[:, 2] <= 0) | (uv[:, 0] < 0) | (uv[:, 0] > intr.width - 1)
                        | (uv[:, 1] < 0) | (uv[:, 1] > intr.height - 1))
-                self.truncated |= bool(out.any())
+                self.truncated |= bool((out & listed).any())
+                listed = listed & ~out
             stamp = T0_NS + i * PERIOD_NS
             yield SynthFrame(i, stamp, stamp + int(jit[i]), None if i in drop_c else color,
-                             None if i in drop_d else depth, intr, gt.copy(),
+                             None if i in drop_d else depth, intr, ren.gt[listed].copy(),
                              ent.gt_ids[listed].astype(np.uint32), vis[listed],
                              self.camera.frame_id)
 

@@ -29,6 +29,10 @@ from .shapes import rot_y
 VIEWS = ('front', 'side', 'back', 'across', 'towards')
 MIN_TRAVEL_M = 0.4
 NEAREST_M = 1.0  # an approaching walk stops this far (horizontally) from the camera
+# The activity area a robot user sets the foreground box to: people stay between NEAREST_M and
+# FARTHEST_M (horizontal pelvis distance) throughout a segment, so that the default box (depth
+# up to 4.3 m) holds them with their limbs; a person beyond it is outside the area by design.
+FARTHEST_M = 4.0
 _J = JOINT_INDEX
 
 
@@ -114,10 +118,13 @@ def place(positions: npt.ArrayLike, view: View) -> tuple[npt.NDArray[np.float64]
     centre = np.array([pel[:, 0].mean(), 0.0, pel[:, 2].mean()])
     out = (p - centre) @ rot.T
     anchor = np.array([view.offset_x_m, 0.0, -view.distance_m])
-    if kind == 'towards':  # stop before the camera: nearest pelvis at least NEAREST_M away
-        nearest = -float((out[:, _J['pelvis'], 2] + anchor[2]).max())
-        if nearest < NEAREST_M:
-            anchor[2] -= NEAREST_M - nearest
+    # Keep the pelvis within [NEAREST_M, FARTHEST_M]: pushed back first (an approaching walk
+    # stops before the camera), then forward as far as that allows.
+    depth = -(out[:, _J['pelvis'], 2] + anchor[2])
+    if depth.min() < NEAREST_M:
+        anchor[2] -= NEAREST_M - float(depth.min())
+    elif depth.max() > FARTHEST_M:
+        anchor[2] += min(float(depth.max()) - FARTHEST_M, float(depth.min()) - NEAREST_M)
     return out + anchor, kind
 
 
