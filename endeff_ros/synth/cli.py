@@ -4,9 +4,10 @@ Writes ``OUT/mcap/<sequence>/`` and/or ``OUT/sqlite3/<sequence>/`` (rosbag2, ROS
 messages, form of ``docs/benchmark-bags.md``). Sequences are generated in parallel
 worker processes (one per core, at most one per sequence).
 
-Two suites: ``paper`` (default; the procedural sequences, unchanged) and ``mocap`` (motion
-capture clips with attributes, ``synth/suite.py``; ``--only`` takes glob patterns of bag names
-there, ``--list`` prints the specs without rendering).
+Three suites: ``paper`` (default; the procedural sequences, unchanged), ``mocap`` (motion
+capture clips with attributes, ``synth/suite.py``) and ``rooms`` (the same clips rendered in
+pairs, empty and furnished room, and camera pans, ``synth/rooms_suite.py``). For the last two
+``--only`` takes glob patterns of bag names and ``--list`` prints the specs without rendering.
 """
 
 from __future__ import annotations
@@ -25,26 +26,29 @@ from .sequences import GROUPS, SEQUENCES, SPECS
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument('--suite', choices=('paper', 'mocap'), default='paper',
+    parser.add_argument('--suite', choices=('paper', 'mocap', 'rooms'), default='paper',
                         help='paper: the procedural sequences (default); mocap: motion-capture '
-                             'clips with attributes')
+                             'clips with attributes; rooms: pairs of bags, empty and furnished '
+                             'room, and camera pans')
     parser.add_argument('--out', type=Path, help='output directory (required unless --list)')
     parser.add_argument('--quick', action='store_true',
                         help='few frames per sequence (for tests), same motions')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
     parser.add_argument('--storage', choices=('mcap', 'sqlite3', 'both'), default=None,
                         help='rosbag2 storage plugin(s) to write (default: both for paper, '
-                             'mcap for mocap)')
+                             'mcap for mocap and rooms)')
     parser.add_argument('--only', default='',
                         help='paper: comma-separated sequence names or groups '
-                             f'({", ".join(GROUPS)}); mocap: comma-separated glob patterns of '
-                             "bag names (e.g. 'dev__*'); default all")
+                             f'({", ".join(GROUPS)}); mocap, rooms: comma-separated glob '
+                             "patterns of bag names (e.g. 'dev__*'); default all")
     parser.add_argument('--clip-cache', type=Path, default=None,
-                        help="mocap: folder of fetched clips (default: the catalogue's own)")
+                        help="mocap, rooms: folder of fetched clips (default: the "
+                             "catalogue's own)")
     parser.add_argument('--max-seconds', type=float, default=None,
                         help='mocap full suite: longest segment per clip in s (default 5)')
     parser.add_argument('--list', action='store_true',
-                        help='mocap: print the bag names and attributes, render nothing')
+                        help='mocap, rooms: print the bag names and attributes, render '
+                             'nothing')
     parser.add_argument('--jobs', type=int, default=0,
                         help='worker processes (default: number of CPUs)')
 
@@ -108,7 +112,7 @@ def load_suite_clips(quick: bool, cache: Path | None) -> list:
         raise ValueError(msg) from exc
 
 
-def select_specs(specs: list, only: str) -> list:
+def select_specs(specs: list, only: str, suite: str = 'mocap') -> list:
     """The specs whose bag name matches one of the comma-separated glob patterns (all if
     empty); a pattern that matches nothing is an error."""
     pats = [t.strip() for t in only.split(',') if t.strip()]
@@ -116,7 +120,7 @@ def select_specs(specs: list, only: str) -> list:
         return specs
     for pat in pats:
         if not any(fnmatch.fnmatchcase(s.name, pat) for s in specs):
-            msg = f'--only pattern {pat!r} matches no bag of the mocap suite'
+            msg = f'--only pattern {pat!r} matches no bag of the {suite} suite'
             raise ValueError(msg)
     return [s for s in specs if any(fnmatch.fnmatchcase(s.name, p) for p in pats)]
 
@@ -127,16 +131,28 @@ def _mocap_one(spec, clips: dict, out: Path, storages: list[str]) -> dict:
     return write_bag(spec, clips, out, storages)
 
 
-def run_mocap(args: argparse.Namespace, storages: list[str]) -> int:
-    """``endeff synth --suite mocap``: render the suite's bags (longest first, in parallel)."""
+def _suite_specs(args: argparse.Namespace, clips: list) -> list:
+    """The specs of ``args.suite`` (mocap or rooms) for ``clips``."""
+    from .rooms_suite import rooms_specs
     from .suite import suite_specs
 
+    max_s = getattr(args, 'max_seconds', None)
+    if args.suite == 'rooms':
+        if max_s is not None:
+            msg = '--max-seconds applies to the mocap suite only (rooms bags have fixed lengths)'
+            raise ValueError(msg)
+        return rooms_specs(clips, quick=args.quick, seed=args.seed)
+    extra = {} if max_s is None else {'max_s': max_s}
+    return suite_specs(clips, quick=args.quick, seed=args.seed, **extra)
+
+
+def run_mocap(args: argparse.Namespace, storages: list[str]) -> int:
+    """``endeff synth --suite mocap|rooms``: render the suite's bags (longest first, in
+    parallel)."""
+    suite = getattr(args, 'suite', 'mocap')
     try:
         clips = load_suite_clips(args.quick, args.clip_cache)
-        extra = {} if getattr(args, 'max_seconds', None) is None else {
-            'max_s': args.max_seconds}
-        specs = select_specs(suite_specs(clips, quick=args.quick, seed=args.seed, **extra),
-                             args.only)
+        specs = select_specs(_suite_specs(args, clips), args.only, suite)
     except ValueError as exc:
         print(f'endeff synth: {exc}', file=sys.stderr)
         return 2
@@ -172,8 +188,8 @@ def run_mocap(args: argparse.Namespace, storages: list[str]) -> int:
     total = sum(r['frames'] for r in results.values())
     for name, r in results.items():
         print(f"{name}: {r['frames']} frames, truncated={r['truncated']}")
-    print(f'wrote {len(results)} mocap bags ({total} frames) x {len(storages)} storage(s) to '
-          f'{args.out} in {dt:.1f} s')
+    print(f'wrote {len(results)} {suite} bags ({total} frames) x {len(storages)} storage(s) '
+          f'to {args.out} in {dt:.1f} s')
     for name, why in failed.items():
         print(f'endeff synth: bag {name} failed: {why}', file=sys.stderr)
     return 1 if failed else 0
@@ -181,12 +197,13 @@ def run_mocap(args: argparse.Namespace, storages: list[str]) -> int:
 
 def run(args: argparse.Namespace) -> int:
     suite = getattr(args, 'suite', 'paper')
-    if args.out is None and not (suite == 'mocap' and getattr(args, 'list', False)):
+    clips_suite = suite in ('mocap', 'rooms')
+    if args.out is None and not (clips_suite and getattr(args, 'list', False)):
         print('endeff synth: --out is required', file=sys.stderr)
         return 2
-    storage = args.storage or ('mcap' if suite == 'mocap' else 'both')
+    storage = args.storage or ('mcap' if clips_suite else 'both')
     storages = ['mcap', 'sqlite3'] if storage == 'both' else [storage]
-    if suite == 'mocap':
+    if clips_suite:
         return run_mocap(args, storages)
     try:
         names = select(args.only)

@@ -15,7 +15,7 @@ import numpy.typing as npt
 
 from ..core.types import KINECT_640, Intrinsics
 from .body import Entity
-from .shapes import Primitive, Vec
+from .shapes import Primitive, Vec, rot_y
 
 FLOOR, WALL, NOTHING, STATIC = -2, -3, -1, -4
 HAIR = np.array([0.25, 0.16, 0.08])
@@ -24,9 +24,11 @@ HAIR = np.array([0.25, 0.16, 0.08])
 @dataclass(frozen=True)
 class Camera:
     """The virtual RGB-D camera: ``height`` (m) above the floor at the scene-frame origin,
-    looking along -z of the scene frame, pitched down by ``pitch`` (rad, any value in
-    (-pi/2, pi/2)) and then rolled by ``roll`` (rad, about the optical axis; positive turns
-    the image content clockwise). The back wall is the plane z = ``wall_z`` of the scene."""
+    looking along -z of the scene frame turned by ``yaw`` (rad, about the vertical axis through
+    the camera; positive turns the view to the left, towards -x), pitched down by ``pitch``
+    (rad, any value in (-pi/2, pi/2)) and then rolled by ``roll`` (rad, about the optical axis;
+    positive turns the image content clockwise). The back wall is the plane z = ``wall_z`` of
+    the scene. ``yaw`` is what a panning camera changes from frame to frame."""
 
     intrinsics: Intrinsics
     height: float = 1.15
@@ -34,6 +36,7 @@ class Camera:
     frame_id: str = 'camera_color_optical_frame'
     wall_z: float = -5.5
     roll: float = 0.0
+    yaw: float = 0.0
 
     @property
     def rotation(self) -> Vec:
@@ -44,6 +47,8 @@ class Camera:
         if self.roll:
             cr, sr = np.cos(self.roll), np.sin(self.roll)
             rot = np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]]) @ rot
+        if self.yaw:  # scene -> camera body (undo the yaw), then as above
+            rot = rot @ rot_y(self.yaw).T
         return rot
 
     @property

@@ -107,18 +107,30 @@ FOOTPRINT = {'table': 0.7, 'chair': 0.35, 'shelf': 0.45, 'lamp': 0.25, 'boxes': 
 
 def scatter(rng: np.random.Generator, keep_clear: npt.ArrayLike, count: int,
             x_range: tuple[float, float], z_range: tuple[float, float],
-            clear_m: float = 0.45) -> list[tuple[str, list[Primitive]]]:
+            clear_m: float = 0.45, half_fov: float | None = None
+            ) -> list[tuple[str, list[Primitive]]]:
     """Up to ``count`` pieces placed at random in the floor area ``x_range`` x ``z_range``
     (scene frame, m), at least ``clear_m`` (plus the piece's footprint) from every point of
-    ``keep_clear`` (K, 2) (x, z) (the people's paths) and from each other."""
+    ``keep_clear`` (K, 2) (x, z) (the people's paths) and from each other.
+
+    ``half_fov`` (rad): draw each piece's bearing from the camera (at the origin, looking along
+    -z) within +-``half_fov`` instead of x within ``x_range`` (which still bounds it), so that
+    every piece stands in the camera's horizontal field of view."""
     clear = np.asarray(keep_clear, dtype=np.float64).reshape(-1, 2)
     placed: list[tuple[float, float, float]] = []
     out = []
     for _ in range(count):
         kind = PIECES[int(rng.integers(len(PIECES)))]
         for _try in range(20):
-            x = float(rng.uniform(*x_range))
-            z = float(rng.uniform(*z_range))
+            if half_fov is None:
+                x = float(rng.uniform(*x_range))
+                z = float(rng.uniform(*z_range))
+            else:
+                bearing = float(rng.uniform(-half_fov, half_fov))
+                z = float(rng.uniform(*z_range))
+                x = -z * float(np.tan(bearing))
+                if not x_range[0] <= x <= x_range[1]:
+                    continue
             r = FOOTPRINT[kind]
             if len(clear) and np.min(np.hypot(clear[:, 0] - x, clear[:, 1] - z)) < r + clear_m:
                 continue
@@ -130,3 +142,16 @@ def scatter(rng: np.random.Generator, keep_clear: npt.ArrayLike, count: int,
             out.append((kind, BUILDERS[kind](x, z, yaw, tex=int(rng.integers(300, 900)))))
             break
     return out
+
+
+def sight_lines(targets: npt.ArrayLike, step_m: float = 0.25) -> npt.NDArray[np.float64]:
+    """Floor points (K, 2) (x, z) every ``step_m`` along the lines from the camera (the
+    origin) to each of ``targets`` (N, 2) (x, z): kept clear (``scatter``'s ``keep_clear``),
+    they keep furniture from standing between the camera and the people, so that furniture
+    stands beside or behind them and never hides them."""
+    t = np.asarray(targets, dtype=np.float64).reshape(-1, 2)
+    if not len(t):
+        return np.zeros((0, 2))
+    n = max(2, int(np.ceil(np.linalg.norm(t, axis=1).max() / step_m)) + 1)
+    f = np.linspace(0.0, 1.0, n)
+    return (f[None, :, None] * t[:, None, :]).reshape(-1, 2)

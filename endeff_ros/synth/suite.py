@@ -16,6 +16,7 @@ the suite seed and the bag's index, so a spec never depends on which other bags 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from collections.abc import Iterator, Sequence
@@ -37,8 +38,9 @@ from .frames import (
     sensed_visibility,
 )
 from .mocap.clip import JOINT_INDEX, MotionClip
-from .render import Camera, render, static_layer
-from .room import BUILDERS, ROOMS, background_entity, scatter
+from .pan import Pan
+from .render import Background, Camera, render, static_layer
+from .room import BUILDERS, ROOMS, background_entity, scatter, sight_lines
 from .sensor import color_image, depth_to_mm
 from .sensors import SENSORS, sensor_depth
 from .skeleton_body import BodyStyle, build_body, carry_pose, scale_to_height, standing_height
@@ -50,6 +52,10 @@ QUICK_BAGS = 48
 FULL_MAX_S = 5.0  # full suite: each clip up to this long (its most active segment)
 DETAILS_KEY = 'endeff.details'
 INTERACTIONS = ('none', 'occluder', 'sit', 'table', 'carry')
+# How a furnished room is laid out: ``scatter`` anywhere off the people's paths (the mocap
+# suite), ``beside`` also off the lines of sight to them, in the camera's field of view (the
+# rooms suite: furniture that never hides the person, so a room's only effect is clutter).
+FURNISH = ('scatter', 'beside')
 _J = JOINT_INDEX
 
 # The cycles (see the module docstring).
@@ -78,7 +84,9 @@ class PersonSpec:
 @dataclass(frozen=True)
 class BagSpec:
     """Everything needed to render one bag. ``attributes`` lacks ``truncated``, which is
-    measured while rendering (a ground-truth point projects outside the image)."""
+    measured while rendering (a ground-truth point projects outside the image). ``furnish``:
+    one of ``FURNISH``; ``pan``: the camera's one turn (``None``: a static camera); ``suite``:
+    the suite's name in the bag's details."""
 
     name: str
     people: tuple[PersonSpec, ...]
@@ -88,6 +96,9 @@ class BagSpec:
     sensor: str
     seed: int
     attributes: dict[str, Any] = field(default_factory=dict)
+    furnish: str = 'scatter'
+    pan: Pan | None = None
+    suite: str = 'mocap'
 
     def __post_init__(self) -> None:
         problems = []
@@ -102,6 +113,8 @@ class BagSpec:
                             f'{self.interaction!r}')
         if self.sensor not in SENSORS:
             problems.append(f'sensor must be one of {sorted(SENSORS)}, got {self.sensor!r}')
+        if self.furnish not in FURNISH:
+            problems.append(f'furnish must be one of {FURNISH}, got {self.furnish!r}')
         if problems:
             msg = f'bag spec {self.name!r}: ' + '; '.join(problems)
             raise ValueError(msg)
@@ -118,7 +131,7 @@ def resampled(clip: MotionClip) -> npt.NDArray[np.float64]:
     return (1 - w) * clip.positions[i] + w * clip.positions[i + 1]
 
 
-def _window(pos: npt.NDArray[np.float64], n: int, mode: str) -> int:
+def window_start(pos: npt.NDArray[np.float64], n: int, mode: str) -> int:
     """First frame of the ``n``-frame window of ``pos`` (T, 22, 3): the one that travels
     farthest (``walk``), holds the lowest pelvis (``sit``), or moves the hands and feet most."""
     t = len(pos)
@@ -151,12 +164,13 @@ def _sits(pos: npt.NDArray[np.float64], n: int) -> bool:
     """Whether the sitting window of ``pos`` (T, 22, 3) brings the pelvis down to a chair's
     height: below 42 % of the standing height (standing: about 54 %, seated on a 0.46 m chair:
     about 30 %). A clip labelled ``sit`` that climbs or perches higher gets no chair."""
-    start = _window(pos, n, 'sit')
+    start = window_start(pos, n, 'sit')
     low = float(pos[start:start + n, _J['pelvis'], 1].min())
     return low < 0.42 * standing_height(pos)
 
 
-def _safe(name: str) -> str:
+def safe_name(name: str) -> str:
+    """A clip name as a part of a bag name: any run of other characters becomes ``-``."""
     return re.sub(r'[^A-Za-z0-9_-]+', '-', name).strip('-') or 'clip'
 
 
@@ -171,7 +185,7 @@ def _style(rng: np.random.Generator) -> BodyStyle:
 
 
 def _is_walk(clip: MotionClip, pos: npt.NDArray[np.float64], n: int) -> bool:
-    start = _window(pos, n, 'walk')
+    start = window_start(pos, n, 'walk')
     seg = pos[start:start + n, _J['pelvis']]
     return float(np.linalg.norm((seg[-1] - seg[0])[[0, 2]])) >= 0.4
 
@@ -201,12 +215,15 @@ def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
         people = _PEOPLE[i % len(_PEOPLE)] if (quick or i >= len(order)) else 1
         if not quick and i >= len(order):
             people = 2 + i % 2
-        specs.append(_spec(i, clip, order, pos, n, people, rng, quick))
+        specs.append(draw_spec(i, clip, order, pos, n, people, rng, quick))
     return specs
 
 
-def _spec(i: int, clip: MotionClip, order: list[MotionClip], pos: dict, n: int, people: int,
-          rng: np.random.Generator, quick: bool) -> BagSpec:
+def draw_spec(i: int, clip: MotionClip, order: list[MotionClip], pos: dict, n: int,
+              people: int, rng: np.random.Generator, quick: bool) -> BagSpec:
+    """The spec of bag ``i`` of ``clip`` (``order``: every clip, sorted by name; ``pos``:
+    their joints at 30 fps; ``n`` frames): sensor, view and room from the cycles, the rest
+    drawn from ``rng``."""
     lap = i // len(order)  # shifts the cycles on each pass over the clips
     sensor = SENSORS[_SENSORS[(i + lap) % len(_SENSORS)]]
     kind = _VIEWS[(i + 2 * lap) % len(_VIEWS)]
@@ -235,7 +252,7 @@ def _spec(i: int, clip: MotionClip, order: list[MotionClip], pos: dict, n: int, 
     side = 1 if rng.random() < 0.5 else -1
     mode = 'sit' if interaction == 'sit' else ('walk' if kind in ('across', 'towards')
                                               else 'active')
-    first = PersonSpec(clip.name, _window(pos[clip.name], n, mode), _style(rng),
+    first = PersonSpec(clip.name, window_start(pos[clip.name], n, mode), _style(rng),
                        View(kind, round(dist, 2), round(cam_h, 2), round(tilt, 1),
                             round(roll, 1), round(off, 2), side), int(rng.integers(1000)))
     if effective_kind(pos[clip.name][first.start:first.start + n], kind) == 'towards':
@@ -250,13 +267,13 @@ def _spec(i: int, clip: MotionClip, order: list[MotionClip], pos: dict, n: int, 
         odist = next((d for d in (dist + 0.85 * k, dist - 0.85 * k) if 1.2 <= d <= far),
                      float(np.clip(dist + 0.85 * k, 1.2, far)))
         persons.append(PersonSpec(
-            other.name, _window(pos[other.name], n, 'walk'), _style(rng),
+            other.name, window_start(pos[other.name], n, 'walk'), _style(rng),
             View('across', round(odist, 2), round(cam_h, 2), round(tilt, 1),
                  round(roll, 1), round(off + sep, 2), -side if k % 2 else side),
             int(rng.integers(1000))))
     view_kind = effective_kind(pos[clip.name][first.start:first.start + n], kind)
-    name = (f'{clip.split}__{_safe(clip.name)}__{i:03d}-{view_kind}-{sensor.name}-{room}'
-            f'-p{people}')
+    name = (f'{clip.split}__{safe_name(clip.name)}__{i:03d}-{view_kind}-{sensor.name}'
+            f'-{room}-p{people}')
     attrs = {'source': clip.source, 'family': clip.family, 'split': clip.split,
              'view': view_kind, 'camera_height_m': round(cam_h, 2),
              'distance_m': round(dist, 2), 'sensor': sensor.name, 'room': room,
@@ -302,10 +319,28 @@ class BagRenderer:
         self.clutter = [k for k, _ in furniture]
         far = max(-float(j[:, _J['pelvis'], 2].min()) for j in self.joints)
         wall_z = -(far + float(rng.uniform(0.45, 0.9))) if spec.room == 'wall' else -5.5
-        cam = aim_camera(self.joints[0], spec.people[0].view, self.model.intrinsics, wall_z)
-        self.camera: Camera = cam
-        prims = [p for _, ps in furniture for p in ps]
-        self.static = static_layer(background_entity(prims), cam)
+        self.aimed = aim_camera(self.joints[0], spec.people[0].view, self.model.intrinsics,
+                                wall_z)
+        self.camera: Camera = self.camera_at(0)
+        self._room = background_entity([p for _, ps in furniture for p in ps])
+        self.static = static_layer(self._room, self.camera)
+        self._static_cam = self.camera
+
+    def camera_at(self, index: int) -> Camera:
+        """The camera of frame ``index``: the one aimed at the first person, turned by the
+        spec's pan (if any) at that frame's time."""
+        pan = self.spec.pan
+        if pan is None:
+            return self.aimed
+        return dataclasses.replace(self.aimed, yaw=float(pan.yaw_at(index / FPS)))
+
+    def _static_for(self, cam: Camera) -> Background:
+        """The room drawn for ``cam``, redrawn only when the camera has turned (a static
+        camera pays once per bag; a pan once per frame of its turn)."""
+        if cam != self._static_cam:
+            self.static = static_layer(self._room, cam)
+            self._static_cam = cam
+        return self.static
 
     def _furnish(self, rng: np.random.Generator) -> list[tuple[str, list]]:
         """Furniture of the room plus the piece the interaction needs (scene frame)."""
@@ -347,8 +382,15 @@ class BagRenderer:
             taken = [np.mean([p.center[[0, 2]] for p in ps], axis=0) for _, ps in out]
             clear = np.concatenate([clear] + [np.array([t]) for t in taken])
             dist = spec.people[0].view.distance_m
-            out += scatter(rng, clear, int(rng.integers(2, 5)), (-1.5, 1.5),
-                           (-min(dist + 1.5, 4.2), -0.9))
+            z_range = (-min(dist + 1.5, 4.2), -0.9)
+            if spec.furnish == 'beside':
+                intr = self.model.intrinsics
+                half_fov = float(np.arctan2(0.5 * intr.width, intr.fx)) - np.deg2rad(4.0)
+                clear = np.concatenate([clear, sight_lines(clear[::3])])
+                out += scatter(rng, clear, int(rng.integers(3, 6)), (-1.5, 1.5), z_range,
+                               half_fov=half_fov)
+            else:
+                out += scatter(rng, clear, int(rng.integers(2, 5)), (-1.5, 1.5), z_range)
         return out
 
     def entity(self, index: int) -> tuple[Entity, npt.NDArray[np.bool_]]:
@@ -366,7 +408,7 @@ class BagRenderer:
             e.prims.extend(extra)
             e.gt_ids = e.gt_ids + 5 * k
             people.append(e)
-            cam_pts = self.camera.to_optical(joints)
+            cam_pts = self.camera_at(index).to_optical(joints)
             front = cam_pts[:, 2] > 0.1
             uv = intr.project(cam_pts[front]) if front.any() else np.zeros((0, 2))
             inside = ((uv[:, 0] >= 0) & (uv[:, 0] < intr.width) & (uv[:, 1] >= 0)
@@ -382,7 +424,8 @@ class BagRenderer:
             -COLOR_JITTER_NS, COLOR_JITTER_NS + 1, size=n)
         for i in range(n):
             ent, listed = self.entity(i)
-            ren = render(ent, self.camera, self.static)
+            cam = self.camera_at(i)
+            ren = render(ent, cam, self._static_for(cam))
             rng = np.random.default_rng([spec.seed, 3, i])
             depth = sensor_depth(ren, self.model, rng)
             color = color_image(ren, rng)
@@ -417,12 +460,19 @@ class BagRenderer:
     def details(self) -> dict[str, Any]:
         """What is needed to reproduce the bag beyond the attributes (not grouped by eval)."""
         cam = self.camera
-        return {'suite': 'mocap', 'frames': self.spec.frames, 'fps': FPS,
-                'pitch_deg': round(float(np.rad2deg(cam.pitch)), 2),
-                'roll_deg': round(float(np.rad2deg(cam.roll)), 2),
-                'wall_z_m': round(cam.wall_z, 2), 'seed': self.spec.seed,
-                'people': [{'clip': p.clip, 'start_frame': p.start, 'body': p.body.label,
-                            'view': asdict(p.view)} for p in self.spec.people]}
+        out = {'suite': self.spec.suite, 'frames': self.spec.frames, 'fps': FPS,
+               'pitch_deg': round(float(np.rad2deg(cam.pitch)), 2),
+               'roll_deg': round(float(np.rad2deg(cam.roll)), 2),
+               'wall_z_m': round(cam.wall_z, 2), 'seed': self.spec.seed,
+               'people': [{'clip': p.clip, 'start_frame': p.start, 'body': p.body.label,
+                           'view': asdict(p.view)} for p in self.spec.people]}
+        if self.spec.pan is not None:
+            pan = self.spec.pan
+            # Frame i is at i / FPS s for the motion and at T0_NS + i * PERIOD_NS in the bag.
+            out['pan'] = {**asdict(pan), 'end_s': pan.end_s,
+                          'start_stamp_ns': T0_NS + round(pan.start_s * FPS * PERIOD_NS),
+                          'end_stamp_ns': T0_NS + round(pan.end_s * FPS * PERIOD_NS)}
+        return out
 
 
 def write_bag(spec: BagSpec, clips: dict[str, MotionClip], out: Path,

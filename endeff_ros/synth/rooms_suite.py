@@ -1,0 +1,146 @@
+"""The ``rooms`` suite: pairs of bags that differ only by their furniture, and camera pans.
+
+A static background model is judged by what the furniture costs: the same person scored with
+and without it. Each *pair* renders one clip segment, body, view, sensor, people and seed twice
+with ``suite.BagRenderer``: once in an empty room (floor and far wall) and once furnished with
+3-5 pieces (table, chair, shelf, floor lamp, boxes; ``room.scatter``) standing beside or behind
+the people, in the camera's field of view and inside the default foreground box
+(``suite.BagSpec.furnish == 'beside'``: off their paths and off the lines of sight from the
+camera to them, so a piece never hides a person). The person's ground truth, the dropped
+frames and the stamps are the same in both bags; the furnished one adds static clutter only.
+
+*Pan* pairs are longer bags with the same two rooms in which the camera turns once
+(``pan.Pan``: 20-30 degrees of yaw over 0.5 s, starting 1.5 s in, still afterwards) while one
+person on their feet who stays in place (a clip of ``PAN_FAMILIES`` that travels less than
+``STILL_M`` in its segment, seen from the front, side or back, at least 2 m away) stays in
+view; the ground truth follows the camera frame by frame.
+
+Bag names are ``<split>__<clip>__<nnn>-<view>-<sensor>-<room>-p<people>-<camera>`` (``room``
+``empty`` or ``furnished``, ``camera`` ``static`` or ``pan``; ``nnn`` numbers the pairs), so
+``*-furnished-*`` or ``*-pan`` select by glob. Clips are split dev/test as in the mocap suite;
+each split gets ``FULL_PAIRS`` static and ``FULL_PANS`` pan pairs (``--quick``: ``QUICK_PAIRS``
+and ``QUICK_PANS`` short ones), the clips spread over the split's families.
+
+Attributes (``endeff.attributes``): the mocap suite's (``interaction`` always ``none``), plus
+``camera`` (``static``/``pan``), ``pair`` (the two bag names, empty first: a list, so that
+``endeff eval`` forms no group of it) and, for pans, ``pan_s`` (start and end of the turn in s
+after the first frame; also a list). ``endeff.details`` adds ``pan`` with the yaw and the
+stamps of the frames at which the turn starts and ends.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from .mocap.clip import JOINT_INDEX, MotionClip
+from .pan import Pan
+from .suite import FPS, BagSpec, draw_spec, resampled, safe_name, window_start
+
+PAIR_S = 3.0  # static pairs: bag length
+PAN_BAG_S = 5.0  # pan pairs: bag length, with the turn
+PAN_START_S = 1.5
+PAN_DURATION_S = 0.5
+PAN_YAW_DEG = (20.0, 30.0)  # magnitude of the turn, drawn per bag; the sign too
+FULL_PAIRS = 24  # static pairs per split
+FULL_PANS = 4  # pan pairs per split
+QUICK_PAIRS = 2
+QUICK_PANS = 1
+QUICK_PAIR_FRAMES = 24
+QUICK_PAN_FRAMES = 30  # 1 s: the turn from 0.3 to 0.8 s
+QUICK_PAN_START_S = 0.3
+STILL_M = 1.0  # a pan's clip moves its pelvis less than this from where it starts
+# Families of pan clips: people on their feet (not crawling, rolling or getting up), whose
+# tracks an evaluation can follow through the turn.
+PAN_FAMILIES = ('wave', 'gesture', 'reach', 'punch', 'kick', 'dance', 'bend', 'jump', 'turn',
+                'walk')
+PAN_MIN_DISTANCE_M = 2.0
+ROOMS = ('empty', 'furnished')
+_PEOPLE = (1, 1, 1, 1, 1, 2)  # static pairs of the full suite: every sixth has two people
+_PAN_VIEWS = ('front', 'side', 'back')
+_J = JOINT_INDEX
+
+
+def _spread(pool: Sequence[MotionClip], count: int) -> list[MotionClip]:
+    """``count`` clips evenly spaced over ``pool`` (cycling when it has fewer)."""
+    if count <= len(pool):
+        return [pool[int((k + 0.5) * len(pool) / count)] for k in range(count)]
+    return [pool[k % len(pool)] for k in range(count)]
+
+
+def _reach(pos: npt.NDArray[np.float64], n: int) -> float:
+    """How far (m, horizontally) the pelvis gets from its first position in the ``n``-frame
+    window of ``pos`` (T, 22, 3) in which the hands, feet and head move most."""
+    start = window_start(pos, n, 'active')
+    pel = pos[start:start + n, _J['pelvis']][:, [0, 2]]
+    return float(np.linalg.norm(pel - pel[0], axis=1).max())
+
+
+def pair_specs(base: BagSpec, index: int, pan: Pan | None = None) -> list[BagSpec]:
+    """The empty and the furnished bag of ``base`` (same people, frames, sensor and seed),
+    with the suite's names and attributes; ``pan``: the camera's turn (``None``: static)."""
+    first = base.people[0]
+    camera = 'static' if pan is None else 'pan'
+    split = base.attributes['split']
+    view = base.attributes['view']
+    stem = f'{split}__{safe_name(first.clip)}__{index:03d}-{view}-{base.sensor}'
+    names = [f'{stem}-{room}-p{len(base.people)}-{camera}' for room in ROOMS]
+    attrs = {**base.attributes, 'interaction': 'none', 'camera': camera, 'pair': names}
+    if pan is not None:
+        attrs['pan_s'] = [round(pan.start_s, 3), round(pan.end_s, 3)]
+    return [dataclasses.replace(base, name=name, room=room, interaction='none',
+                                furnish='beside', pan=pan, suite='rooms',
+                                attributes={**attrs, 'room': room})
+            for name, room in zip(names, ROOMS)]
+
+
+def rooms_specs(clips: Sequence[MotionClip], *, quick: bool = False,
+                seed: int = 0) -> list[BagSpec]:
+    """The suite's bag specs for ``clips``, pair by pair (empty, then furnished), per split
+    (dev, then test) the static pairs and then the pan pairs. Clips of family ``sit`` are left
+    out: without their chair they would sit on air in the empty room."""
+    if not clips:
+        msg = 'the rooms suite needs at least one clip'
+        raise ValueError(msg)
+    order = sorted(clips, key=lambda c: c.name)
+    usable = [c for c in order if c.family != 'sit']
+    if not usable:
+        msg = 'the rooms suite needs a clip of a family other than sit'
+        raise ValueError(msg)
+    pos = {c.name: resampled(c) for c in order}
+    n_pair = QUICK_PAIR_FRAMES if quick else round(PAIR_S * FPS)
+    n_pan = QUICK_PAN_FRAMES if quick else round(PAN_BAG_S * FPS)
+    start_s = QUICK_PAN_START_S if quick else PAN_START_S
+    specs: list[BagSpec] = []
+    index = 0
+    for split in ('dev', 'test'):
+        pool = sorted((c for c in usable if c.split == split), key=lambda c: (c.family, c.name))
+        if not pool:
+            continue
+        for k, clip in enumerate(_spread(pool, QUICK_PAIRS if quick else FULL_PAIRS)):
+            people = 1 if quick else _PEOPLE[k % len(_PEOPLE)]
+            rng = np.random.default_rng([seed, 11, index])
+            base = draw_spec(index, clip, order, pos, n_pair, people, rng, quick)
+            specs += pair_specs(base, index)
+            index += 1
+        upright = [c for c in pool if c.family in PAN_FAMILIES] or pool
+        still = [c for c in upright if _reach(pos[c.name], n_pan) < STILL_M] or upright
+        for k, clip in enumerate(_spread(still, QUICK_PANS if quick else FULL_PANS)):
+            rng = np.random.default_rng([seed, 11, index])
+            base = draw_spec(index, clip, order, pos, n_pan, 1, rng, quick)
+            yaw = float(rng.uniform(*PAN_YAW_DEG)) * (1 if rng.random() < 0.5 else -1)
+            pan = Pan(start_s, PAN_DURATION_S, round(yaw, 1))
+            person = base.people[0]
+            view = dataclasses.replace(
+                person.view, kind=_PAN_VIEWS[k % len(_PAN_VIEWS)], offset_x_m=0.0,
+                distance_m=max(person.view.distance_m, PAN_MIN_DISTANCE_M))
+            person = dataclasses.replace(person, view=view,
+                                         start=window_start(pos[clip.name], n_pan, 'active'))
+            attrs = {**base.attributes, 'view': view.kind, 'distance_m': view.distance_m}
+            base = dataclasses.replace(base, people=(person,), frames=n_pan, attributes=attrs)
+            specs += pair_specs(base, index, pan)
+            index += 1
+    return specs
