@@ -92,10 +92,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_reader_arguments(parser)
 
 
-def _default_estimate(frame: RGBDFrame, params: EndeffParams | None) -> Any:
+def _background_estimate() -> EstimateFn:
+    """The default single-frame estimator with its own static background (one per bag, as
+    the tracker has), so both estimators see the same foreground."""
+    from endeff_ros.core.background import BackgroundModel
+    from endeff_ros.core.params import EndeffParams
     from endeff_ros.core.single_frame import estimate_frame
 
-    return estimate_frame(frame, params)
+    model = BackgroundModel()
+
+    def estimate(frame: RGBDFrame, params: EndeffParams | None) -> Any:
+        params = params or EndeffParams()
+        return estimate_frame(frame, params, background=model if params.background else None)
+
+    return estimate
 
 
 def _default_tracker(params: EndeffParams | None) -> Any:
@@ -197,7 +207,7 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
     whose ``update(frame)`` returns something with ``tracks``. A frame the estimators reject
     with :class:`InputError` counts as a frame with no estimate. Raises :class:`BagError`.
     """
-    estimate_fn = estimate_fn or _default_estimate
+    estimate_fn = estimate_fn or _background_estimate()
     tracker_factory = tracker_factory or _default_tracker
     path = Path(path)
     res = SequenceResult(name=name or bag_name(path), path=str(path),

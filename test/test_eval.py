@@ -117,7 +117,7 @@ def _patch_core(monkeypatch: pytest.MonkeyPatch, seen: list[Any]) -> None:
     import endeff_ros.core.single_frame as sf
     import endeff_ros.core.tracker as tr
 
-    def estimate(frame: Any, params: Any = None) -> Any:
+    def estimate(frame: Any, params: Any = None, **_: Any) -> Any:  # background=...
         seen.append(params)
         return fake_estimate_frame(frame, params)
 

@@ -23,6 +23,8 @@ from .types import Intrinsics
 if TYPE_CHECKING:
     import numpy.typing as npt
 
+    from .background import BackgroundModel
+
     Columns = tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]
 
 #: Depth beyond this many metres is treated as no reading (no RGB-D sensor of this class
@@ -74,6 +76,15 @@ def _backproject(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, stride
                  z_range: tuple[float, float], median: bool) -> Columns:
     """:func:`depth_to_points` as three (N,) columns x, y, z (the cheaper form: compressing
     1-D arrays is several times faster than (N, 3) rows)."""
+    z, valid = _valid_pixels(depth, intrinsics, stride, z_range, median)
+    return _columns(z, valid, intrinsics, stride)
+
+
+def _valid_pixels(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, stride: int,
+                  z_range: tuple[float, float], median: bool,
+                  ) -> tuple[npt.NDArray[np.floating], npt.NDArray[np.bool_]]:
+    """The strided (and optionally median-filtered) depth image and its pixels within
+    ``z_range``, both (H / stride, W / stride), after checking the input."""
     if depth.ndim != 2:
         msg = f'depth must be 2-D, got shape {depth.shape}'
         raise InputError(msg)
@@ -94,6 +105,13 @@ def _backproject(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, stride
     lo, hi = max(z_range[0], 1e-6), min(z_range[1], MAX_RANGE_M)
     with np.errstate(invalid='ignore'):
         valid = (z >= lo) & (z <= hi)  # NaN compares False
+    return z, valid
+
+
+def _columns(z: npt.NDArray[np.floating], valid: npt.NDArray[np.bool_],
+             intrinsics: Intrinsics, stride: int) -> Columns:
+    """x, y, z columns of the ``valid`` pixels of the strided depth image ``z``."""
+    h, w = intrinsics.height, intrinsics.width
     zz = z[valid].astype(np.float64)
     # Pixel offsets from the principal point per column and row, broadcast over the image:
     # no pixel-coordinate arrays are materialised.
@@ -222,14 +240,19 @@ def _voxel_means(cols: Columns, size: float) -> npt.NDArray[np.float64]:
 
 def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
                      params: EndeffParams, *, floor: FloorPlane | None = None,
+                     background: BackgroundModel | None = None, stamp_ns: int = 0,
                      ) -> tuple[npt.NDArray[np.float64], FloorPlane | None]:
-    """Section 3 in one call: back-project, crop to the box, drop the floor, voxelise.
+    """Section 3 in one call: back-project, crop to the box, drop the floor, drop the static
+    background, voxelise.
 
     ``floor`` may give a known plane; otherwise it is fitted when ``params.floor_removal``.
+    ``background``: a :class:`~endeff_ros.core.background.BackgroundModel` that learns from
+    this frame (stamped ``stamp_ns``) and keeps only the parts of the box that moved.
     Returns the (N, 3) foreground points and the floor plane used (or None).
     """
-    x, y, z = _backproject(depth, intrinsics, params.pixel_stride,
-                           (params.box_min_z, params.box_max_z), params.depth_median)
+    z_image, valid = _valid_pixels(depth, intrinsics, params.pixel_stride,
+                                   (params.box_min_z, params.box_max_z), params.depth_median)
+    x, y, z = _columns(z_image, valid, intrinsics, params.pixel_stride)
     keep = _in_box(x, y, z, params)
     if params.floor_removal:
         if floor is None:
@@ -242,6 +265,12 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
                               iterations=params.floor_iterations, sample=_FLOOR_SAMPLE)
         if floor is not None:
             keep &= floor.heights(x, y, z) > params.floor_distance
+    if background is not None:
+        # The model sees every reading of the strided image (walls beyond the box included:
+        # a person in front of them changed those pixels), and the box and floor as a mask.
+        candidate = np.zeros(valid.shape, dtype=bool)
+        candidate[valid] = keep
+        keep = background.foreground(z_image, candidate, stamp_ns, params)[valid]
     x, y, z = x[keep], y[keep], z[keep]
     if params.voxel_size <= 0 or len(z) == 0:
         return np.stack([x, y, z], axis=1), floor

@@ -53,6 +53,23 @@ class EndeffParams:
     floor_min_fraction: float = _p(0.05, 'A floor must hold at least this fraction of points.',
                                    lo=0.0, hi=1.0)
     floor_iterations: int = _p(40, 'RANSAC hypotheses for the floor plane.', lo=1, hi=10000)
+    background: bool = _p(True, 'Static background: learn a per-pixel background depth while '
+                          'running and drop the connected parts of the foreground that never '
+                          'moved (furniture, walls); off for a camera that moves all the time '
+                          'or people who never move.')
+    background_learn_s: float = _p(1.0, 'Static background: learning time after the start, a '
+                                   'reset or a camera motion, during which nothing is removed.',
+                                   unit='s', lo=0.0, hi=60.0)
+    background_margin: float = _p(0.1, 'Static background: a pixel nearer than the background '
+                                  'by more than this (plus 0.005 z^2 for depth noise) changed.',
+                                  unit='m', lo=0.01, hi=2.0)
+    background_absorb_s: float = _p(30.0, 'Static background: something nearer than the '
+                                    'background and still for this long, holding no track, '
+                                    'becomes background.', unit='s', lo=0.1, hi=86400.0)
+    background_camera_motion_fraction: float = _p(0.15, 'Static background: when this fraction '
+                                                  'of the pixels is nearer and another such '
+                                                  'fraction farther, the camera moved and the '
+                                                  'background is re-learnt.', lo=0.01, hi=1.0)
 
     # --- Section 4.1: narrow-band level-set expansion ------------------------------------------
     band_delta: float = _p(0.08, 'Proximity constraint: new band points lie within this '

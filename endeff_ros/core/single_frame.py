@@ -26,6 +26,8 @@ from .types import Candidate, Intrinsics, RGBDFrame
 if TYPE_CHECKING:
     import numpy.typing as npt
 
+    from .background import BackgroundModel
+
 
 @dataclass(frozen=True)
 class EntityEstimate:
@@ -65,16 +67,20 @@ class FrameEstimate:
 
 
 def estimate_frame(frame: RGBDFrame, params: EndeffParams | None = None, *,
-                   floor: FloorPlane | None = None) -> FrameEstimate:
+                   floor: FloorPlane | None = None,
+                   background: BackgroundModel | None = None) -> FrameEstimate:
     """Run Sections 3-4 on one frame: foreground cloud, bands, graph, candidates.
 
-    ``floor`` may give a known floor plane (the tracker passes the previous frame's).
+    ``floor`` may give a known floor plane (the tracker passes the previous frame's);
+    ``background`` a static-background model that learns from the frame and removes what
+    never moved (:mod:`.background`).
     Raises :class:`~endeff_ros.core.errors.InputError` for unusable frames; an empty
     foreground is not an error (the estimate simply has no entities).
     """
     params = params or EndeffParams()
     timer = _StageTimer()
-    points, floor = foreground_cloud(frame.depth, frame.intrinsics, params, floor=floor)
+    points, floor = foreground_cloud(frame.depth, frame.intrinsics, params, floor=floor,
+                                     background=background, stamp_ns=frame.stamp_ns)
     timer.lap('cloud')
     estimate = estimate_points(points, params, timer=timer)
     if params.drop_cut_ends:

@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from .background import BackgroundModel
 from .bands import UNREACHED
 from .cloud import FloorPlane
 from .flow import FlowEstimator, propagate_points
@@ -111,17 +112,26 @@ class Tracker:
     def __init__(self, params: EndeffParams | None = None) -> None:
         self.params = params or EndeffParams()
         self._flow: FlowEstimator | None = None
+        self.background = BackgroundModel()
         self.reset(forget_ids=True)
 
     def reset(self, *, forget_ids: bool = False) -> None:
         """Forget all tracks (e.g. when time jumps backwards during bag replay). New tracks
         get ids never used before, so that a subscriber never confuses an old end-effector with
-        a new one; ``forget_ids`` starts them at 0 again (a fresh tracker, a warm-up)."""
+        a new one; ``forget_ids`` starts them at 0 again (a fresh tracker, a warm-up). The
+        static background is kept (the camera still sees the same room), except with
+        ``forget_ids``."""
         self._tracks: list[_TrackState] = []
+        if forget_ids:
+            self.background = BackgroundModel()
         if forget_ids or not hasattr(self, '_next_id'):
             self._next_id = 0
         self._prev: RGBDFrame | None = None
         self._floor: FloorPlane | None = None
+
+    def reset_background(self) -> None:
+        """Re-learn the static background from the next frame; the tracks are kept."""
+        self.background.reset()
 
     def _flow_estimator(self) -> FlowEstimator:
         if self._flow is None or self._flow.method != self.params.flow_method:
@@ -131,7 +141,8 @@ class Tracker:
     def estimate(self, frame: RGBDFrame) -> FrameEstimate:
         """Sections 3-4 of ``frame`` with this tracker's floor: the first step of
         :meth:`update`, which a caller may run early (depth needs no colour) and pass on."""
-        return estimate_frame(frame, self.params, floor=self._floor)
+        return estimate_frame(frame, self.params, floor=self._floor,
+                              background=self.background if self.params.background else None)
 
     def flow(self, color: npt.NDArray[np.uint8] | None,
              intrinsics: Intrinsics) -> RoiFlow | None:
@@ -163,6 +174,8 @@ class Tracker:
         self._anchor(estimate)
         stages['update'] = (time.perf_counter() - t0) * 1e3
         self._prev = frame
+        if self.params.background:  # tracked entities are never absorbed by the background
+            self.background.protect(self._anchors(), frame.intrinsics, self.params.pixel_stride)
         tracks = [self._publish(t) for t in self._tracks]
         return TrackerResult(frame.stamp_ns, frame.frame_id, tracks, estimate, stages)
 

@@ -1,0 +1,263 @@
+"""The static background: a per-pixel background depth learned while the estimator runs.
+
+Furniture, walls and shelves inside the foreground box are foreground to Section 3, and the
+bands and the graph then give them end-effectors (a chair's legs, a shelf's corners). A
+background model removes what never moved, with the person present from the first frame:
+
+- **Background depth: the farthest depth seen** at each pixel of the (strided) depth image.
+  Whatever stood in front of the background and moved away taught the model what is behind
+  it, so no empty-room phase is needed. A farther reading is adopted only after
+  ``FAR_FRAMES`` consecutive frames agree on it (within the margin): flying pixels at a
+  depth edge jump to the far surface now and then, and a single such reading would otherwise
+  make the near object's rim "changed" for ever. Readings within the margin pull the
+  background towards them slowly (``FOLLOW``), so sensor noise does not ratchet it outwards
+  as a pure maximum would.
+- **Changed pixels**: nearer than the background by more than ``background_margin`` plus a
+  term growing with z^2 (stereo and structured-light depth noise grows with z^2), then a
+  3x3 opening, which removes the 1-pixel lines that flying pixels leave along static edges.
+- **Foreground: the whole connected part that changed.** Pixels inside the box and off the
+  floor are labelled into connected components (4-connected, cut where neighbouring depths
+  jump by more than a few cm: see :func:`depth_components`). A component is foreground when
+  enough of its pixels changed (``MIN_CHANGED_FRACTION`` of it, at least
+  ``MIN_CHANGED_PX`` full-resolution pixels). So a chair that was always there (no changed
+  pixel) is dropped, a person whose torso stood still while an arm moved stays whole, and a
+  robot's static pedestal stays with its moving arm. Pixels removed at depth edges (the far
+  side of a jump) are kept only if they changed themselves.
+- **Learning**: for ``background_learn_s`` after the start (and after a re-learn) everything
+  is kept; components then need changed pixels. Keeping everything costs the furniture's
+  false positives for that time, but the alternative, dropping components proven static
+  earlier, drops a person present from frame 0 until they have moved by more than the margin,
+  which loses recall on exactly the frames where a tracker starts its tracks.
+- **Absorption**: a pixel that stays nearer than the background, at a steady depth, for
+  ``background_absorb_s`` becomes background (an object put down and left). Pixels of a
+  component holding a track (:meth:`BackgroundModel.protect`, called by the tracker) restart
+  that clock every frame, so a person who stands still while tracked is never absorbed.
+- **Camera motion**: when a fraction ``background_camera_motion_fraction`` of the known
+  pixels is nearer and another such fraction was farther within ``RECENT_FAR_S`` (the
+  adopted and the pending farther readings), the whole static scene moved through the image:
+  the background is re-learnt from the current frame. A person moving in front of a learnt
+  background changes pixels mostly in one direction (nearer where they are; farther only
+  where they stood at the start and for a few frames), a pan changes both at every depth
+  edge. Tracks are not touched (the tracker keeps its ids).
+
+Everything is vectorised on the strided image the cloud is built from (320x240 by default):
+a few dozen array operations and one ``cv2.connectedComponents``. Time comes from the frame
+stamps; a stamp going back (a bag loop) does not move the model's clock back.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import cv2
+import numpy as np
+
+from .cloud import MAX_RANGE_M
+from .params import EndeffParams
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+    from .types import Intrinsics
+
+#: Consecutive frames that must agree on a farther depth before the background takes it.
+FAR_FRAMES = 3
+#: Weight of a reading within the margin in the background's running mean.
+FOLLOW = 0.05
+#: Depth-noise term of the margin: ``background_margin + NOISE_Z2 * z**2`` metres.
+NOISE_Z2 = 0.005
+#: A component is foreground when at least this fraction of its pixels changed ...
+MIN_CHANGED_FRACTION = 0.01
+#: ... and at least this many full-resolution pixels (divided by pixel_stride**2).
+MIN_CHANGED_PX = 48
+#: Neighbouring depths differing by more than ``(EDGE_STEP + EDGE_STEP_Z * z) * stride``
+#: metres are a depth edge between two components (a limb's grazing side at 4 m differs by
+#: less; a person 10 cm in front of a chair by more).
+EDGE_STEP = 0.02
+EDGE_STEP_Z = 0.01
+#: Farther readings adopted within this time count towards camera motion.
+RECENT_FAR_S = 0.25
+#: Camera motion is only judged when this fraction of the image has a known background.
+MIN_KNOWN_FRACTION = 0.1
+#: Window (pixels of the strided image, each side) in which a track finds its component.
+PROTECT_RADIUS_PX = 3
+
+
+def depth_components(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_],
+                     stride: int) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]]:
+    """Connected parts of ``mask`` split at depth edges.
+
+    ``depth`` (H, W) metres with 0 or NaN where there is no reading, ``mask`` (H, W) the
+    pixels to label, ``stride`` the pixel stride of the image (neighbours are that many
+    full-resolution pixels apart). A pixel whose 4-neighbour is nearer by more than the edge
+    step is the far side of an edge and is left out; 4-connectivity then cannot cross the
+    edge. Returns the labels (0: none) and the left-out far-side pixels of ``mask``.
+    """
+    z = np.where(np.isfinite(depth) & (depth > 0), depth, np.inf).astype(np.float32)
+    step = np.float32((EDGE_STEP + EDGE_STEP_Z * np.minimum(z, 20.0)) * stride)
+    lower = z - step  # a neighbour below this is nearer by more than the step
+    far = np.zeros(z.shape, dtype=bool)
+    far[:, :-1] |= z[:, 1:] < lower[:, :-1]
+    far[:, 1:] |= z[:, :-1] < lower[:, 1:]
+    far[:-1, :] |= z[1:, :] < lower[:-1, :]
+    far[1:, :] |= z[:-1, :] < lower[1:, :]
+    far &= mask
+    _, labels = cv2.connectedComponents((mask & ~far).view(np.uint8), connectivity=4,
+                                        ltype=cv2.CV_32S)
+    return labels, far
+
+
+class BackgroundModel:
+    """Per-pixel background depth of one camera view, learned online (module docstring).
+
+    :meth:`foreground` takes each frame's strided depth image and the pixels Section 3 would
+    keep and returns those that are not static background; :meth:`protect` marks the
+    components holding tracks; :meth:`reset` re-learns from the next frame.
+    """
+
+    def __init__(self) -> None:
+        self.relearns = 0  # camera motions detected
+        self.resets = 0  # re-learns asked for (reset())
+        self._reset_requested = False
+        self._clear()
+
+    def _clear(self) -> None:
+        self._bg: npt.NDArray[np.float32] | None = None
+        self._labels: npt.NDArray[np.int32] | None = None
+        self._learn_until = 0.0
+        self._last_raw: float | None = None
+        self._offset = 0.0
+        self._t = 0.0
+
+    def reset(self) -> None:
+        """Re-learn from the next frame (the ``reset_background`` service). Only sets a flag,
+        so it may be called from another thread than :meth:`foreground`'s."""
+        self._reset_requested = True
+
+    @property
+    def learning(self) -> bool:
+        """True while everything is still kept (the first ``background_learn_s``)."""
+        return self._bg is None or self._t < self._learn_until
+
+    @property
+    def background(self) -> npt.NDArray[np.float32] | None:
+        """(H, W) background depth of the strided image, metres (0: not known), or None."""
+        return self._bg
+
+    def _clock(self, stamp_ns: int) -> float:
+        """Model time (s): the stamp, never going back (a bag loop continues the clock)."""
+        raw = stamp_ns * 1e-9
+        if self._last_raw is not None and raw < self._last_raw:
+            self._offset += self._last_raw - raw
+        self._last_raw = raw
+        self._t = max(self._t, raw + self._offset)
+        return self._t
+
+    def _learn(self, depth: npt.NDArray[np.float32], valid: npt.NDArray[np.bool_],
+               t: float, params: EndeffParams) -> None:
+        """Start learning from ``depth``: the background is the current frame."""
+        shape = depth.shape
+        self._bg = np.where(valid, depth, 0).astype(np.float32)
+        self._far_ref = np.zeros(shape, np.float32)
+        self._far_n = np.zeros(shape, np.int16)
+        self._far_t = np.full(shape, -np.inf, np.float64)
+        self._near_ref = np.zeros(shape, np.float32)
+        self._near_since = np.full(shape, t, np.float64)
+        self._learn_until = t + params.background_learn_s
+
+    def foreground(self, depth: npt.NDArray[np.floating], candidate: npt.NDArray[np.bool_],
+                   stamp_ns: int, params: EndeffParams) -> npt.NDArray[np.bool_]:
+        """Learn from one frame and return the pixels of ``candidate`` that are foreground.
+
+        ``depth`` (H, W) metres (0, NaN: no reading) is the strided image Section 3 builds the
+        cloud from (``params.pixel_stride``), ``candidate`` (H, W) its pixels inside the box
+        and off the floor; ``stamp_ns`` the frame's stamp. Returns an (H, W) mask, a subset
+        of ``candidate``.
+        """
+        d = np.nan_to_num(np.asarray(depth, dtype=np.float32), nan=0.0, posinf=0.0,
+                          neginf=0.0)
+        valid = (d > 0) & (d <= MAX_RANGE_M)
+        d[~valid] = 0
+        t = self._clock(stamp_ns)
+        stride = params.pixel_stride
+        if self._reset_requested or self._bg is None or self._bg.shape != d.shape:
+            self.resets += self._reset_requested
+            self._reset_requested = False
+            self._learn(d, valid, t, params)
+            self._labels, _ = depth_components(d, candidate, stride)
+            return candidate.copy()
+        bg = self._bg
+        known = valid & (bg > 0)
+        margin = np.float32(params.background_margin) + np.float32(NOISE_Z2) * bg * bg
+        nearer = known & (d < bg - margin)
+        farther = known & (d > bg + margin)
+
+        n_known = int(np.count_nonzero(known))
+        if n_known >= MIN_KNOWN_FRACTION * d.size:
+            recent_far = farther | (self._far_t > t - RECENT_FAR_S)
+            f = params.background_camera_motion_fraction * n_known
+            if np.count_nonzero(nearer) >= f and np.count_nonzero(recent_far & known) >= f:
+                self.relearns += 1
+                self._learn(d, valid, t, params)
+                self._labels, _ = depth_components(d, candidate, stride)
+                return candidate.copy()
+
+        # Farther readings: adopted once FAR_FRAMES consecutive frames agree.
+        agree = farther & (self._far_n > 0) & (np.abs(d - self._far_ref) <= margin)
+        self._far_n = np.where(farther, np.where(agree, self._far_n + 1, 1), 0).astype(np.int16)
+        self._far_ref = np.where(farther & ~agree, d, self._far_ref)
+        adopt = self._far_n >= FAR_FRAMES
+        # Readings within the margin: the running mean follows them.
+        steady = known & ~nearer & ~farther
+        bg = np.where(steady, bg + np.float32(FOLLOW) * (d - bg), bg)
+        bg = np.where(adopt | (valid & (bg <= 0)), d, bg).astype(np.float32)
+        self._far_t = np.where(adopt, t, self._far_t)
+        self._far_n[adopt] = 0
+        # Nearer readings: absorbed after background_absorb_s at a steady depth.
+        same = nearer & (np.abs(d - self._near_ref) <= margin)
+        self._near_since = np.where(same, self._near_since, t)
+        self._near_ref = np.where(nearer & ~same, d, self._near_ref)
+        absorb = nearer & (t - self._near_since >= params.background_absorb_s)
+        bg[absorb] = d[absorb]
+        self._bg = bg
+
+        labels, edge = depth_components(d, candidate, stride)
+        self._labels = labels
+        if t < self._learn_until:
+            return candidate.copy()
+        changed = cv2.morphologyEx((nearer & ~absorb).view(np.uint8), cv2.MORPH_OPEN,
+                                   np.ones((3, 3), np.uint8)).view(bool)
+        n = int(labels.max()) + 1
+        total = np.bincount(labels.ravel(), minlength=n)
+        hits = np.bincount(labels[changed], minlength=n)
+        need = np.maximum(MIN_CHANGED_PX / stride ** 2, MIN_CHANGED_FRACTION * total)
+        moving = hits >= need
+        moving[0] = False
+        return (moving[labels] & candidate) | (edge & changed)
+
+    def protect(self, positions: npt.NDArray[np.float64], intrinsics: Intrinsics,
+                stride: int) -> None:
+        """Restart the absorption clock of the components holding the (N, 3) ``positions``
+        (metres, optical frame: the tracks of the last frame) in that frame's labels, so a
+        tracked entity that stands still is not absorbed. ``stride`` is the pixel stride the
+        last frame was labelled at."""
+        labels = self._labels
+        if labels is None or self._bg is None or len(positions) == 0:
+            return
+        pts = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+        pts = pts[pts[:, 2] > 1e-6]
+        if len(pts) == 0:
+            return
+        h, w = labels.shape
+        u = np.round((intrinsics.fx * pts[:, 0] / pts[:, 2] + intrinsics.cx) / stride)
+        v = np.round((intrinsics.fy * pts[:, 1] / pts[:, 2] + intrinsics.cy) / stride)
+        ok = np.isfinite(u) & np.isfinite(v)
+        r = PROTECT_RADIUS_PX
+        offsets = np.arange(-r, r + 1)
+        uu = np.clip(u[ok, None, None].astype(np.int64) + offsets[None, None, :], 0, w - 1)
+        vv = np.clip(v[ok, None, None].astype(np.int64) + offsets[None, :, None], 0, h - 1)
+        hit = np.unique(labels[vv, uu])
+        hit = hit[hit > 0]
+        if hit.size:
+            mask = np.isin(labels, hit)
+            self._near_since[mask] = self._t
