@@ -140,3 +140,128 @@ def test_latency_bench_accounts_for_every_frame(bag):
     # Colour images arriving while their depth partner was being estimated got their optical
     # flow computed in the callback, alongside.
     assert int(result['node_diagnostics']['flow_alongside']) > 0
+
+
+# ------------------------------------------------------------------ colour images lost
+DROP_EVERY = 10
+DROP_LOOPS = 4  # the quick bag 4 times over (re-stamped): 4 colour images withheld
+
+
+@pytest.fixture(scope='module')
+def record_drop(bag):
+    from tools.session import run_session
+
+    return run_session(bag, loops=DROP_LOOPS, drop_color_every=DROP_EVERY, markers=False,
+                       timeout_s=240.0, frame_timeout_s=20.0)
+
+
+@pytest.fixture(scope='module')
+def record_no_color(bag):
+    from tools.session import run_session
+
+    return run_session(bag, no_color=True, markers=False, timeout_s=240.0,
+                       frame_timeout_s=20.0)
+
+
+def _looped_stamps(bag, loops: int) -> dict[str, list[int]]:
+    from tools.replay import BagSource
+
+    with BagSource(bag) as source:
+        msgs = list(source.looped(loops))
+    return {kind: sorted(m.stamp_ns for m in msgs if m.kind == kind)
+            for kind in ('color', 'depth')}
+
+
+def test_every_depth_frame_answered_once_when_one_colour_image_in_ten_is_lost(bag, record_drop):
+    """Lock-step over DDS with every 10th colour image withheld: each depth image gets
+    exactly one cloud with its stamp, those whose colour was withheld included."""
+    from tools.replay import unpaired_depth
+
+    stamps = _looped_stamps(bag, DROP_LOOPS)
+    record = record_drop
+    assert record['depth_sent'] == stamps['depth'], record['logs']['driver']
+    # The driver withheld the 10th, 20th, ... colour image and sent the others.
+    assert record['color_dropped'] == stamps['color'][DROP_EVERY - 1::DROP_EVERY]
+    assert sorted(record['color_sent'] + record['color_dropped']) == stamps['color']
+    lost = record['depth_color_dropped']
+    assert len(lost) >= DROP_LOOPS - 1 and set(lost) <= set(stamps['depth'])
+    assert set(lost) == unpaired_depth(stamps['depth'], record['color_sent'], round(0.015e9)) - \
+        set(record['unpaired_depth'])
+    clouds = record['outputs']['node']
+    assert sorted(clouds) == stamps['depth'], record['logs']['node']
+    assert record['duplicates']['node'] == 0 and record['waited_out'] == 0
+    latency = record['latency']['node']
+    assert latency['dropped_frames'] == latency['unpaired_inputs'] == 0
+    assert latency['color_dropped']['frames_sent'] == len(lost)
+    assert latency['color_dropped']['dropped_frames'] == 0
+    # Frames processed without colour still find the person's end-effectors.
+    assert sum(len(clouds[s]['x']) > 0 for s in lost) >= len(lost) - 1
+
+
+def _offline_without_colour(bag) -> dict[int, dict[str, list]]:
+    """Tracker outputs of every depth frame of ``bag`` with its colour removed, offline."""
+    import dataclasses
+
+    from endeff_ros.bag.reader import BagReader
+    from endeff_ros.core.tracker import Tracker
+
+    tracker, out = Tracker(), {}
+    with BagReader(bag) as reader:
+        for frame, _ in reader.frames():
+            tracks = tracker.update(dataclasses.replace(frame, color=None)).tracks
+            out[frame.stamp_ns] = {'id': [t.id for t in tracks],
+                                   'xyz': [t.position.tolist() for t in tracks]}
+    return out
+
+
+def test_without_a_colour_topic_every_depth_frame_is_answered_and_tracked(bag, record_no_color):
+    """No colour topic at all: every depth image is answered once, the person's end-effectors
+    are found in most frames, and the clouds are those of the tracker run offline on the
+    same depth images without colour."""
+    record = record_no_color
+    stamps = _looped_stamps(bag, 1)
+    assert record['no_color'] and record['color_sent'] == []
+    assert record['depth_sent'] == stamps['depth'], record['logs']['driver']
+    assert set(record['depth_color_dropped']) | set(record['unpaired_depth']) == set(
+        stamps['depth'])
+    clouds = record['outputs']['node']
+    assert sorted(clouds) == stamps['depth'], record['logs']['node']
+    assert record['duplicates']['node'] == 0 and record['waited_out'] == 0
+    assert sum(len(c['x']) > 0 for c in clouds.values()) >= 0.8 * len(clouds)
+    offline = _offline_without_colour(bag)
+    assert sorted(offline) == stamps['depth']
+    for stamp, want in offline.items():
+        node = clouds[stamp]
+        assert sorted(node['id']) == sorted(want['id']), stamp
+        got = np.array(sorted(zip(node['id'], node['x'], node['y'], node['z']))).reshape(-1, 4)
+        exp = np.array(sorted([i, *p] for i, p in zip(want['id'], want['xyz']))).reshape(-1, 4)
+        np.testing.assert_allclose(got[:, 1:], exp[:, 1:], atol=1e-5)
+
+
+def test_compare_drops_runs_the_three_colour_cases(bag):
+    """``latency_bench --compare-drops`` (open loop, one pass of the quick bag per case):
+    every depth image sent is accounted for in each case (output, dropped with colour,
+    unpaired, or dropped among those whose colour was withheld), the withheld ones are the
+    expected ones, and the differences are those of the cases' percentiles."""
+    from tools.latency_bench import compare_drops
+
+    stamps = _looped_stamps(bag, 1)
+    result = compare_drops(bag, rate_hz=15.0, loops=1)
+    cases = result['cases']
+    assert list(cases) == ['all_color', 'drop_color_1_in_10', 'no_color']
+    withheld = {'all_color': 0, 'drop_color_1_in_10': 1,
+                'no_color': len(stamps['depth']) - 1}  # the bag lacks one colour image
+    for name, case in cases.items():
+        node = case['node']
+        assert node['frames_sent'] == len(stamps['depth']), name
+        lost = node['color_dropped']
+        assert lost['frames_sent'] == withheld[name], name
+        assert node['outputs'] + node['dropped_frames'] + node['unpaired_inputs'] + \
+            lost['dropped_frames'] == node['frames_sent'], name
+        assert node['outputs'] >= node['frames_sent'] - 3, (name, case['runs'])
+        assert 0 < node['latency_ms_p50'] <= node['latency_ms_p95'], name
+    base = cases['all_color']['node']
+    for name in ('drop_color_1_in_10', 'no_color'):
+        for q in ('p50', 'p95'):
+            assert result['differences'][name][f'{q}_ms'] == pytest.approx(
+                cases[name]['node'][f'latency_ms_{q}'] - base[f'latency_ms_{q}'], abs=1e-3)

@@ -2,19 +2,25 @@
 
 from __future__ import annotations
 
+import argparse
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from endeff_ros.ros import convert
 from tools.procs import profile_path, ros_env
 from tools.replay import (
     Output,
     RawMessage,
+    ReplayStats,
     cdr_stamp,
+    color_dropped_depth,
     jittered,
     latency_summary,
+    positive_int,
+    replay,
     restamp,
     unpaired_depth,
 )
@@ -104,3 +110,122 @@ def test_ros_env_sets_or_removes_the_profile():
     off = ros_env(profile=False, base=base)
     assert 'FASTDDS_DEFAULT_PROFILES_FILE' not in off
     assert 'FASTRTPS_DEFAULT_PROFILES_FILE' not in off
+
+
+class _Source:
+    """A bag stand-in for :func:`replay`: ``frames`` frames of camera info, colour (2 ms
+    late) and depth, at 30 Hz."""
+
+    def __init__(self, frames: int) -> None:
+        period = 33_333_333
+        kinds = (('camera_info', 0), ('color', 2_000_000), ('depth', 0))
+        self.msgs = [RawMessage(kind, 10**18 + i * period + off, b'')
+                     for i in range(frames) for kind, off in kinds]
+
+    def depth_stamps(self) -> list[int]:
+        return [m.stamp_ns for m in self.msgs if m.kind == 'depth']
+
+    def looped(self, loops: int):
+        assert loops == 1
+        return iter(self.msgs)
+
+
+class _Publisher:
+    def __init__(self) -> None:
+        self.sent: list[RawMessage] = []
+
+    def publish(self, msg: RawMessage) -> None:
+        self.sent.append(msg)
+
+
+class _Executor:
+    def spin_once(self, timeout_sec: float = 0.0) -> None:
+        pass
+
+
+def _replay(frames: int, **kw) -> tuple[_Source, _Publisher, ReplayStats]:
+    source, pub = _Source(frames), _Publisher()
+    return source, pub, replay(_Executor(), source, pub, jitter_s=0.0, **kw)
+
+
+def test_every_nth_colour_image_is_withheld_and_its_depth_frame_named():
+    source, pub, stats = _replay(25, drop_color_every=10)
+    colors = [m.stamp_ns for m in source.msgs if m.kind == 'color']
+    depth = source.depth_stamps()
+    assert stats.color_dropped == [colors[9], colors[19]]
+    assert [m.stamp_ns for m in pub.sent if m.kind == 'color'] == stats.color_sent
+    assert sorted(stats.color_sent + stats.color_dropped) == colors
+    assert stats.depth_sent == depth  # depth and camera info untouched
+    assert sum(m.kind == 'camera_info' for m in pub.sent) == 25
+    slop = 15_000_000
+    assert color_dropped_depth(depth, stats.color_sent, stats.color_dropped, slop) == {
+        depth[9], depth[19]}
+
+
+def test_no_colour_withholds_every_colour_image():
+    source, pub, stats = _replay(6, no_color=True)
+    assert not any(m.kind == 'color' for m in pub.sent) and stats.color_sent == []
+    assert len(stats.color_dropped) == 6 and len(stats.depth_sent) == 6
+    depth = source.depth_stamps()
+    assert color_dropped_depth(depth, [], stats.color_dropped, 15_000_000) == set(depth)
+
+
+def test_a_depth_frame_the_bag_left_unpaired_is_not_counted_as_withheld():
+    depth = [1_000, 2_000, 3_000, 4_000]
+    sent, dropped = [1_001, 4_002], [2_003]  # the bag has no colour near 3_000
+    assert color_dropped_depth(depth, sent, dropped, 10) == {2_000}
+    assert unpaired_depth(depth, sent + dropped, 10) == {3_000}
+
+
+def test_a_bad_drop_period_is_refused():
+    assert positive_int('10') == 10
+    for text in ('0', '-3', 'x', '2.5'):
+        with pytest.raises(argparse.ArgumentTypeError, match='at least 1'):
+            positive_int(text)
+    with pytest.raises(ValueError, match='drop_color_every'):
+        _replay(3, drop_color_every=0)
+
+
+def test_latency_summary_accounts_for_withheld_colour_apart():
+    stamps = list(range(1, 11))
+    sent = {s: 0 for s in stamps}
+    outputs = {s: Output(s * 1_000_000, 'f', np.zeros(0)) for s in stamps if s not in (2, 5, 9)}
+    out = latency_summary(sent, outputs, stamps, unpaired={9}, color_dropped={4, 5, 6})
+    assert out['frames_sent'] == 10 and out['outputs'] == 7
+    assert out['dropped_frames'] == 1 and out['unpaired_inputs'] == 1  # 2 and 9
+    lost = out['color_dropped']
+    assert lost['frames_sent'] == 3 and lost['outputs'] == 2 and lost['dropped_frames'] == 1
+    assert lost['latency_ms_max'] == 6.0 and lost['latency_ms_p50'] == 5.0
+    assert out['latency_ms_max'] == 10.0  # every output, withheld colour or not
+    none = latency_summary(sent, outputs, stamps)
+    assert none['color_dropped'] == {'frames_sent': 0, 'outputs': 0, 'dropped_frames': 0}
+    assert none['dropped_frames'] == 3
+
+
+def test_compare_drops_runs_the_three_cases_in_turn(monkeypatch):
+    import tools.latency_bench as bench
+
+    calls = []
+
+    def fake(bag, **kw):
+        calls.append(kw)
+        n = len(calls)
+        lost = {'frames_sent': 1, 'outputs': 1, 'dropped_frames': 0, 'latency_ms_p50': 40.0,
+                'latency_ms_p95': 40.0}
+        node = {'frames_sent': 10, 'outputs': 10, 'dropped_frames': 0, 'unpaired_inputs': 0,
+                'latency_ms_p50': 10.0 + n, 'latency_ms_p95': 20.0 + 2 * n, 'color_dropped': lost}
+        return {'color': str(n), 'node': node, 'relay': {'latency_ms_p95': 5.0}}
+
+    monkeypatch.setattr(bench, 'ros_latency_bench', fake)
+    result = bench.compare_drops('bag', rounds=2, rate_hz=30.0, loops=1)
+    assert [(c.get('drop_color_every'), c.get('no_color', False)) for c in calls] == [
+        (None, False), (10, False), (None, True)] * 2
+    assert all(c['rate_hz'] == 30.0 and c['loops'] == 1 for c in calls)
+    cases = result['cases']
+    # medians over the two rounds: all colour runs 1 and 4, 1 in 10 runs 2 and 5, none 3 and 6
+    assert cases['all_color']['node']['latency_ms_p50'] == 12.5
+    assert cases['no_color']['node']['latency_ms_p95'] == 29.0
+    assert cases['drop_color_1_in_10']['node']['outputs'] == 20
+    assert cases['drop_color_1_in_10']['node']['color_dropped']['frames_sent'] == 2
+    assert result['differences'] == {'drop_color_1_in_10': {'p50_ms': 1.0, 'p95_ms': 2.0},
+                                     'no_color': {'p50_ms': 2.0, 'p95_ms': 4.0}}

@@ -6,14 +6,21 @@ own process with the Fast DDS SHM profile. Latency is measured from the publicat
 depth image to the receipt of the output stamped with it (same clock, the driver process).
 A frame without an output is ``dropped`` (the node skips frames it is too slow for), unless
 its depth image had no colour image within the node's ``sync_slop`` in the bag: those are
-``unpaired_inputs`` (the synthetic bags drop a few colour images on purpose; the
-approximate-time synchroniser cannot complete such a set, and the node only processes a depth
-image alone once colour has been missing for ``color_timeout``).
+``unpaired_inputs`` (the synthetic bags drop a few colour images on purpose; the node answers
+such a depth image without colour, so they normally have an output too).
+
+Lost colour images: ``--drop-color-every N`` withholds every N-th colour image, ``--no-color``
+sends none (no colour topic at all). The depth images whose colour was withheld are accounted
+apart, under ``node.color_dropped`` (sent, outputs, ``dropped_frames``, their latency); the
+top-level percentiles cover every output. ``--compare-drops`` runs all colour, 1 colour image
+in 10 withheld and no colour one after another (``--rounds`` times, alternating) and prints
+one JSON with the node's p50/p95 per case and the differences to the all-colour case.
 
     python -m tools.latency_bench [--bag BAG] [--rate 30] [--loops 3] [--no-profile]
+    python -m tools.latency_bench --compare-drops [--rounds 2] [--loops 3]
 
-``benchmark()`` (what ``python -m tools.bench --ros`` calls) and ``ros_latency_bench()`` return the
-JSON-ready dict.
+``benchmark()`` (what ``python -m tools.bench --ros`` calls), ``ros_latency_bench()`` and
+``compare_drops()`` return the JSON-ready dict.
 """
 
 from __future__ import annotations
@@ -25,7 +32,10 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from endeff_ros.cli_common import load_params_option, print_json
+from tools.replay import positive_int
 
 DEFAULT_SEQUENCE = 'jumping_jacks'
 
@@ -45,13 +55,17 @@ def ros_latency_bench(bag: str | Path | None = None, *, rate_hz: float = 30.0,
                       markers: bool = False,
                       loops: int = 3, profile: bool = True,
                       max_frames: int | None = None,
-                      node_params: dict[str, Any] | None = None) -> dict[str, Any]:
+                      node_params: dict[str, Any] | None = None,
+                      drop_color_every: int | None = None,
+                      no_color: bool = False) -> dict[str, Any]:
     """Replay ``bag`` (default: a synthetic sequence) at ``rate_hz``; node vs relay latency.
 
-    Returns ``{'bag', 'rate_hz', 'fastdds_profile', 'node': {...}, 'relay': {...},
+    Returns ``{'bag', 'rate_hz', 'fastdds_profile', 'color', 'node': {...}, 'relay': {...},
     'node_diagnostics': {...}}`` where node and relay hold ``frames_sent``, ``outputs``,
-    ``dropped_frames`` and ``latency_ms_p50/p95/p99/max``. ``markers``: also subscribe to
+    ``dropped_frames``, ``latency_ms_p50/p95/p99/max`` and ``color_dropped`` (the same for
+    the depth images whose colour was withheld). ``markers``: also subscribe to
     ``end_effectors/markers`` (as RViz would), which makes the node build them.
+    ``drop_color_every=N``: withhold every N-th colour image; ``no_color``: send none.
     """
     from tools.session import run_session
 
@@ -59,16 +73,77 @@ def ros_latency_bench(bag: str | Path | None = None, *, rate_hz: float = 30.0,
         path = Path(bag) if bag is not None else _default_bag(Path(tmp))
         record = run_session(path, rate_hz=rate_hz, relay=True, profile=profile,
                              max_frames=max_frames, loops=loops, frame_timeout_s=5.0,
-                             node_params=node_params, markers=markers)
+                             node_params=node_params, markers=markers,
+                             drop_color_every=drop_color_every, no_color=no_color)
     diag = record.get('diagnostics', {})
     keys = ('processed', 'prepared', 'prepared_flow', 'flow_alongside', 'skipped', 'colorless',
             'dropped_unpaired.color', 'dropped_unpaired.depth', 'processing_ms.p50',
-            'processing_ms.p95', 'processing_ms.p99')
+            'processing_ms.p95', 'processing_ms.p99', 'warnings.color_lost',
+            'warnings.color_late', 'warnings.color_stopped')
+    color = 'none' if no_color else (f'1 in {drop_color_every} withheld'
+                                     if drop_color_every else 'all')
     return {'bag': str(path), 'rate_hz': rate_hz, 'loops': loops,
-            'fastdds_profile': profile, 'markers_subscribed': markers,
+            'fastdds_profile': profile, 'markers_subscribed': markers, 'color': color,
             'node': record['latency']['node'],
             'relay': record['latency']['relay'],
             'node_diagnostics': {k: diag[k] for k in keys if k in diag}}
+
+
+#: The cases of :func:`compare_drops`: name -> ``ros_latency_bench`` colour options.
+DROP_CASES = {'all_color': {}, 'drop_color_1_in_10': {'drop_color_every': 10},
+              'no_color': {'no_color': True}}
+
+
+def compare_drops(bag: str | Path | None = None, *, rounds: int = 1,
+                  **kwargs: Any) -> dict[str, Any]:
+    """:func:`ros_latency_bench` with all colour, 1 colour image in 10 withheld and no colour,
+    one after another (``rounds`` times, in that order, so that a drift of the machine's speed
+    touches every case); ``kwargs`` go to every run.
+
+    Returns ``{'cases': {case: {'node': {p50, p95, outputs, dropped_frames, color_dropped...},
+    'relay_p95', 'runs': [...]}}, 'differences': {case: {'p50_ms', 'p95_ms'}}}``: per case the
+    median over rounds of the node's p50 and p95 (ms), frames without output (with colour,
+    and of those whose colour was withheld), and the differences of the medians to the
+    all-colour case. Each run's full result is kept under ``runs``.
+    """
+    with tempfile.TemporaryDirectory(prefix='endeff_bench_') as tmp:
+        path = Path(bag) if bag is not None else _default_bag(Path(tmp))
+        runs: dict[str, list[dict[str, Any]]] = {case: [] for case in DROP_CASES}
+        for _ in range(rounds):
+            for case, options in DROP_CASES.items():
+                runs[case].append(ros_latency_bench(path, **kwargs, **options))
+    cases = {case: _case_summary(results) for case, results in runs.items()}
+    base = cases['all_color']['node']
+    differences = {case: {f'{q}_ms': _minus(c['node'].get(f'latency_ms_{q}'),
+                                            base.get(f'latency_ms_{q}'))
+                          for q in ('p50', 'p95')}
+                   for case, c in cases.items() if case != 'all_color'}
+    return {'bag': str(path), 'rounds': rounds, 'cases': cases, 'differences': differences}
+
+
+def _case_summary(results: list[dict[str, Any]]) -> dict[str, Any]:
+    """One case of :func:`compare_drops`: medians over its runs, counts summed."""
+    def median(values: list[Any]) -> float | None:
+        values = [v for v in values if v is not None]
+        return round(float(np.median(values)), 3) if values else None
+
+    nodes = [r['node'] for r in results]
+    node = {f'latency_ms_{q}': median([n.get(f'latency_ms_{q}') for n in nodes])
+            for q in ('p50', 'p95')}
+    for key in ('frames_sent', 'outputs', 'dropped_frames', 'unpaired_inputs'):
+        node[key] = sum(n[key] for n in nodes)
+    node['color_dropped'] = {
+        **{key: sum(n['color_dropped'][key] for n in nodes)
+           for key in ('frames_sent', 'outputs', 'dropped_frames')},
+        **{f'latency_ms_{q}': median([n['color_dropped'].get(f'latency_ms_{q}') for n in nodes])
+           for q in ('p50', 'p95')}}
+    return {'color': results[0]['color'], 'node': node,
+            'relay_p95_ms': median([r['relay'].get('latency_ms_p95') for r in results]),
+            'runs': results}
+
+
+def _minus(a: float | None, b: float | None) -> float | None:
+    return None if a is None or b is None else round(a - b, 3)
 
 
 def benchmark(**kwargs: Any) -> dict[str, Any]:
@@ -105,12 +180,26 @@ def main(argv: list[str] | None = None) -> int:
                              'them only for subscribers)')
     parser.add_argument('--params', metavar='YAML', help='node parameter file (e.g. the fast '
                         'preset config/endeff_fast.yaml)')
+    color = parser.add_mutually_exclusive_group()
+    color.add_argument('--drop-color-every', type=positive_int, metavar='N',
+                       help='withhold every N-th colour image (a camera losing colour images)')
+    color.add_argument('--no-color', action='store_true',
+                       help='send no colour image at all (no colour topic)')
+    color.add_argument('--compare-drops', action='store_true',
+                       help='run all colour, 1 in 10 withheld and no colour one after another; '
+                            'one JSON with p50/p95 per case and the differences')
+    parser.add_argument('--rounds', type=positive_int, default=1,
+                        help='--compare-drops: repeat the three cases this many times')
     args = parser.parse_args(argv)
     params = load_params_option(args.params, 'latency_bench')
-    result = ros_latency_bench(args.bag, rate_hz=args.rate, loops=args.loops,
-                               profile=not args.no_profile, max_frames=args.max_frames,
-                               markers=args.markers,
-                               node_params=params.to_dict() if params else None)
+    common = {'rate_hz': args.rate, 'loops': args.loops, 'profile': not args.no_profile,
+              'max_frames': args.max_frames, 'markers': args.markers,
+              'node_params': params.to_dict() if params else None}
+    if args.compare_drops:
+        result = compare_drops(args.bag, rounds=args.rounds, **common)
+    else:
+        result = ros_latency_bench(args.bag, drop_color_every=args.drop_color_every,
+                                   no_color=args.no_color, **common)
     print_json(result, args.json)
     return 0
 

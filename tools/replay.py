@@ -6,10 +6,16 @@ original stamps, plus its ground truth; :class:`Replayer` publishes them (raw, n
 :func:`replay` drives both, either in lock-step (each depth image is sent once the output for
 the previous one arrived: every frame is processed, as offline) or at a fixed rate (open loop:
 what a live camera does). Colour and depth send times are jittered.
+
+A camera that loses colour images is imitated by withholding every ``drop_color_every``-th
+colour image, or all of them (``no_color``: the colour topic is not even advertised);
+:func:`color_dropped_depth` names the depth images whose colour partner was withheld, so that a
+benchmark can report them apart from the bag's own unpaired images.
 """
 
 from __future__ import annotations
 
+import argparse
 import heapq
 import itertools
 import struct
@@ -27,6 +33,18 @@ from endeff_ros.ros import convert
 KINDS = ('camera_info', 'color', 'depth')  # also the send priority at equal stamps
 TOPICS = {'color': 'color/image_raw', 'depth': 'depth/image_raw',
           'camera_info': 'depth/camera_info'}
+
+
+def positive_int(text: str) -> int:
+    """argparse type of ``--drop-color-every``: a whole number of at least 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        msg = f'expected a whole number of at least 1, got {text!r}'
+        raise argparse.ArgumentTypeError(msg)
+    return value
 
 
 def cdr_stamp(raw: bytes) -> int:
@@ -145,17 +163,23 @@ def jittered(messages: Iterator[RawMessage], jitter_s: float,
 
 
 class Replayer:
-    """Raw publishers of the three camera inputs under ``namespace`` (reliable QoS)."""
+    """Raw publishers of the camera inputs ``kinds`` under ``namespace`` (reliable QoS); an
+    input left out is not advertised at all (``no_color``: a camera without colour)."""
 
-    def __init__(self, node: Any, namespace: str = '/camera') -> None:
+    def __init__(self, node: Any, namespace: str = '/camera',
+                 kinds: tuple[str, ...] = KINDS) -> None:
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import CameraInfo, Image
 
+        unknown = set(kinds) - set(TOPICS)
+        if unknown or 'depth' not in kinds:
+            msg = f'replayer inputs must include depth and be among {KINDS}, got {kinds}'
+            raise ValueError(msg)
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         ns = namespace.rstrip('/')
         self.pubs = {kind: node.create_publisher(CameraInfo if kind == 'camera_info' else Image,
-                                                 f'{ns}/{topic}', qos)
-                     for kind, topic in TOPICS.items()}
+                                                 f'{ns}/{TOPICS[kind]}', qos)
+                     for kind in KINDS if kind in kinds}
         self.sent: dict[int, int] = {}  # depth stamp -> perf_counter_ns at publish
 
     def matched(self, depth_subscribers: int = 1) -> bool:
@@ -247,6 +271,7 @@ class ReplayStats:
 
     depth_sent: list[int] = field(default_factory=list)
     color_sent: list[int] = field(default_factory=list)
+    color_dropped: list[int] = field(default_factory=list)  # colour stamps withheld on purpose
     messages: int = 0
     waited_out: int = 0  # lock-step: outputs that never came within the timeout
     seconds: float = 0.0
@@ -256,15 +281,24 @@ def replay(executor: Any, source: BagSource, replayer: Replayer, *,
            collector: Collector | None = None, wait_on: str = 'node',
            rate_hz: float | None = None, jitter_s: float = 0.008,
            frame_timeout_s: float = 10.0, max_frames: int | None = None,
-           loops: int = 1, seed: int = 0) -> ReplayStats:
+           loops: int = 1, seed: int = 0, drop_color_every: int | None = None,
+           no_color: bool = False) -> ReplayStats:
     """Publish ``source`` through ``replayer``.
 
     Lock-step (``rate_hz=None``): before each depth image, wait (up to ``frame_timeout_s``)
     for ``collector``'s ``wait_on`` output of the previous one. Fixed rate: message times
     follow the header stamps, scaled so that depth images come at ``rate_hz``. ``loops`` > 1
     replays the bag again and again with shifted stamps (longer benchmarks).
+    ``drop_color_every=N`` withholds the N-th, 2N-th, ... colour image of the stream (a camera
+    losing 1 colour image in N); ``no_color`` withholds all of them. Withheld images keep
+    their place in the timing (nothing is sent instead) and are listed in
+    ``stats.color_dropped``.
     """
+    if drop_color_every is not None and drop_color_every < 1:
+        msg = f'drop_color_every must be at least 1 (colour images), got {drop_color_every}'
+        raise ValueError(msg)
     stats = ReplayStats()
+    colors = 0  # colour images of the stream so far, withheld ones included
     t_start = time.monotonic()
     scale = None
     if rate_hz is not None:
@@ -287,6 +321,11 @@ def replay(executor: Any, source: BagSource, replayer: Replayer, *,
             spin_for(executor, t0 + (key - key0) * scale / 1e9 - time.monotonic())
         elif msg.kind != 'camera_info':
             spin_for(executor, float(np.random.default_rng(key).uniform(0, jitter_s)))
+        if msg.kind == 'color':
+            colors += 1
+            if no_color or (drop_color_every and colors % drop_color_every == 0):
+                stats.color_dropped.append(msg.stamp_ns)
+                continue
         replayer.publish(msg)
         stats.messages += 1
         if msg.kind == 'depth':
@@ -312,20 +351,45 @@ def unpaired_depth(depth_stamps: list[int], color_stamps: list[int],
     return {int(s) for s in depth[gap > slop_ns]}
 
 
-def latency_summary(sent: dict[int, int], outputs: dict[int, Output],
-                    stamps: list[int], unpaired: set[int] = frozenset()) -> dict[str, Any]:
+def color_dropped_depth(depth_stamps: list[int], color_sent: list[int],
+                        color_dropped: list[int], slop_ns: int) -> set[int]:
+    """Depth stamps that had a colour partner within ``slop_ns`` in the bag but none among the
+    colour images actually sent: the frames whose colour the replay withheld (a depth image
+    the bag itself left unpaired is not one of them)."""
+    return (unpaired_depth(depth_stamps, color_sent, slop_ns)
+            - unpaired_depth(depth_stamps, [*color_sent, *color_dropped], slop_ns))
+
+
+def latency_summary(sent: dict[int, int], outputs: dict[int, Output], stamps: list[int],
+                    unpaired: set[int] = frozenset(),
+                    color_dropped: set[int] = frozenset()) -> dict[str, Any]:
     """Delivered count, dropped frames and end-to-end latency percentiles (ms) of one output.
 
     Frames in ``unpaired`` (inputs that cannot be synchronised) without an output are counted
-    as ``unpaired_inputs``, not as ``dropped_frames``.
+    as ``unpaired_inputs``, not as ``dropped_frames``. Frames in ``color_dropped`` (their
+    colour image was withheld, :func:`color_dropped_depth`) are accounted apart, under
+    ``color_dropped``: sent, outputs, ``dropped_frames`` (no output) and their own latency
+    percentiles. The top-level percentiles cover every output, so that runs with and without
+    colour losses compare as a whole.
     """
-    lat = np.array([(outputs[s].receipt_ns - sent[s]) / 1e6 for s in stamps if s in outputs],
-                   dtype=np.float64)
-    missing = [s for s in stamps if s not in outputs]
+    missing = [s for s in stamps if s not in outputs and s not in color_dropped]
     lost_unpaired = sum(s in unpaired for s in missing)
-    out: dict[str, Any] = {'frames_sent': len(stamps), 'outputs': int(lat.size),
+    out: dict[str, Any] = {'frames_sent': len(stamps), 'outputs': 0,
                            'dropped_frames': len(missing) - lost_unpaired,
                            'unpaired_inputs': lost_unpaired}
+    out.update(_summary(sent, outputs, stamps))
+    lost = _summary(sent, outputs, [s for s in stamps if s in color_dropped])
+    out['color_dropped'] = {'frames_sent': lost['frames_sent'], 'outputs': lost['outputs'],
+                            'dropped_frames': lost['frames_sent'] - lost['outputs'], **lost}
+    return out
+
+
+def _summary(sent: dict[int, int], outputs: dict[int, Output],
+             stamps: list[int]) -> dict[str, Any]:
+    """Frames sent, outputs and latency percentiles (ms; none without outputs) of ``stamps``."""
+    lat = np.array([(outputs[s].receipt_ns - sent[s]) / 1e6 for s in stamps if s in outputs],
+                   dtype=np.float64)
+    out: dict[str, Any] = {'frames_sent': len(stamps), 'outputs': int(lat.size)}
     if lat.size:
         p50, p95, p99 = np.percentile(lat, [50, 95, 99])
         out.update(latency_ms_p50=round(float(p50), 3), latency_ms_p95=round(float(p95), 3),

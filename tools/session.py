@@ -6,6 +6,9 @@ environment (Fast DDS, the SHM profile unless ``profile=False``, a private ROS d
 driver writes a JSON record; ``run_session`` returns it as a dict::
 
     {'bag', 'frame_id', 'depth_sent': [stamp, ...], 'waited_out', 'replay_seconds',
+     'drop_color_every', 'no_color', 'color_sent': [stamp, ...], 'color_dropped': [...],
+     'depth_color_dropped': [depth stamp whose colour was withheld, ...],
+     'unpaired_depth': [depth stamp the bag itself has no colour for, ...],
      'outputs': {'node': {stamp: {'frame_id', 'latency_ms', 'x', 'y', 'z', 'id', 'state'}},
                  'relay': {...}},
      'duplicates': {'node': 0, ...}, 'markers': {stamp: [[id, x, y, z], ...]},
@@ -46,13 +49,16 @@ def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = 
                 profile: bool = True, node_params: dict[str, Any] | None = None,
                 namespace: str = '/camera', domain_id: int | None = None,
                 max_frames: int | None = None, loops: int = 1, jitter_s: float = 0.008,
-                frame_timeout_s: float = 20.0, timeout_s: float = 1800.0) -> dict[str, Any]:
+                frame_timeout_s: float = 20.0, timeout_s: float = 1800.0,
+                drop_color_every: int | None = None, no_color: bool = False) -> dict[str, Any]:
     """Replay ``bag`` to a fresh ``endeff_node`` process and return the collected record.
 
     ``rate_hz=None`` replays in lock-step (every frame processed); otherwise at that rate.
     ``loops`` replays the bag that many times (re-stamped, see :meth:`BagSource.looped`).
     ``markers=False``: nobody subscribes to ``end_effectors/markers`` (the node then does not
     build them), as for a consumer of ``end_effectors`` alone.
+    ``drop_color_every=N`` withholds every N-th colour image, ``no_color`` all of them (the
+    colour topic is then not advertised); the record names the depth images concerned.
     Every child process is stopped (SIGINT, then harder) before returning.
     """
     if domain_id is None:
@@ -85,6 +91,10 @@ def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = 
                 driver += ['--max-frames', str(max_frames)]
             if loops > 1:
                 driver += ['--loops', str(loops)]
+            if drop_color_every is not None:
+                driver += ['--drop-color-every', str(drop_color_every)]
+            if no_color:
+                driver += ['--no-color']
             proc = start(driver, env, stdout=logs['driver'], stderr=subprocess.STDOUT)
             procs.append(proc)
             try:
@@ -125,9 +135,11 @@ def _driver(args: argparse.Namespace) -> int:
     from rclpy.executors import SingleThreadedExecutor
 
     from tools.replay import (
+        KINDS,
         BagSource,
         Collector,
         Replayer,
+        color_dropped_depth,
         latency_summary,
         replay,
         spin_for,
@@ -154,7 +166,8 @@ def _driver(args: argparse.Namespace) -> int:
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
     record: dict[str, Any] = {'bag': str(args.bag)}
     with BagSource(args.bag) as source:
-        replayer = Replayer(node, ns)
+        replayer = Replayer(node, ns, tuple(k for k in KINDS
+                                            if not (args.no_color and k == 'color')))
         collector = Collector(node, topics, markers_topic=None if args.no_markers
                               else f'{ns}/end_effectors/markers')
         if not spin_until(executor, lambda: replayer.matched(1 + args.relay) and
@@ -164,7 +177,8 @@ def _driver(args: argparse.Namespace) -> int:
         spin_for(executor, 0.5)
         stats = replay(executor, source, replayer, collector=collector, rate_hz=args.rate,
                        jitter_s=args.jitter, frame_timeout_s=args.frame_timeout,
-                       max_frames=args.max_frames, loops=args.loops)
+                       max_frames=args.max_frames, loops=args.loops,
+                       drop_color_every=args.drop_color_every, no_color=args.no_color)
         sent = stats.depth_sent
         spin_until(executor, lambda: all(s in collector.clouds[n] for n in topics
                                          for s in sent), 5.0 if args.rate else 30.0)
@@ -181,10 +195,17 @@ def _driver(args: argparse.Namespace) -> int:
             **{f: o.points[f].tolist() for f in ('x', 'y', 'z', 'id', 'state')
                if f in (o.points.dtype.names or ())}}
             for s, o in clouds.items()} for name, clouds in collector.clouds.items()}
-        unpaired = unpaired_depth(sent, stats.color_sent, round(args.sync_slop * 1e9))
-        record['latency'] = {name: latency_summary(replayer.sent, collector.clouds[name], sent,
-                                                   unpaired if name == 'node' else set())
-                             for name in topics}
+        slop_ns = round(args.sync_slop * 1e9)
+        # Unpaired: no colour in the bag itself; colour dropped: withheld by this replay.
+        unpaired = unpaired_depth(sent, [*stats.color_sent, *stats.color_dropped], slop_ns)
+        lost = color_dropped_depth(sent, stats.color_sent, stats.color_dropped, slop_ns)
+        record.update(drop_color_every=args.drop_color_every, no_color=args.no_color,
+                      color_sent=stats.color_sent, color_dropped=stats.color_dropped,
+                      depth_color_dropped=sorted(lost), unpaired_depth=sorted(unpaired))
+        record['latency'] = {name: latency_summary(
+            replayer.sent, collector.clouds[name], sent,
+            *((unpaired, lost) if name == 'node' else ()))
+            for name in topics}
         record['markers'] = {str(s): [[m.id, m.pose.position.x, m.pose.position.y,
                                        m.pose.position.z] for m in arr.markers
                                       if m.ns == 'end_effectors' and m.action == 0]
@@ -196,6 +217,8 @@ def _driver(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from tools.replay import positive_int
+
     parser = argparse.ArgumentParser(description='Replay driver of run_session (internal).')
     parser.add_argument('--bag', required=True)
     parser.add_argument('--out', required=True)
@@ -208,6 +231,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--frame-timeout', type=float, default=20.0)
     parser.add_argument('--max-frames', type=int, default=None)
     parser.add_argument('--loops', type=int, default=1)
+    parser.add_argument('--drop-color-every', type=positive_int, default=None, metavar='N',
+                        help='withhold every N-th colour image')
+    parser.add_argument('--no-color', action='store_true',
+                        help='send no colour image (the colour topic is not advertised)')
     parser.add_argument('--sync-slop', type=float, default=_DEFAULT_SLOP_S,
                         help="the node's sync_slop: depth images without colour this close "
                              'are unpaired inputs, not drops')
