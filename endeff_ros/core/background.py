@@ -38,7 +38,9 @@ background model removes what never moved, with the person present from the firs
   the background is re-learnt from the current frame. A person moving in front of a learnt
   background changes pixels mostly in one direction (nearer where they are; farther only
   where they stood at the start and for a few frames), a pan changes both at every depth
-  edge. Tracks are not touched (the tracker keeps its ids).
+  edge. Tracks are not touched (the tracker keeps its ids). While the camera brakes, a third
+  of that fraction re-learns again during the learning time that follows (the turn's last
+  degree would otherwise leave every edge of the furniture "changed").
 
 Everything is vectorised on the strided image the cloud is built from (320x240 by default):
 a few dozen array operations and one ``cv2.connectedComponents``. Time comes from the frame
@@ -73,12 +75,16 @@ MIN_CHANGED_PX = 48
 #: Neighbouring depths differing by more than ``(EDGE_STEP + EDGE_STEP_Z * z) * stride``
 #: metres are a depth edge between two components (a limb's grazing side at 4 m differs by
 #: less; a person 10 cm in front of a chair by more).
-EDGE_STEP = 0.02
-EDGE_STEP_Z = 0.01
+EDGE_STEP = 0.1
+EDGE_STEP_Z = 0.03
 #: Farther readings adopted within this time count towards camera motion.
 RECENT_FAR_S = 0.25
 #: Camera motion is only judged when this fraction of the image has a known background.
 MIN_KNOWN_FRACTION = 0.1
+#: While learning after a camera motion, a motion this many times smaller re-learns again:
+#: the camera is still settling (a pan brakes), and a background taken mid-turn would leave
+#: the furniture's edges "changed" for good.
+SETTLING_DIVISOR = 3.0
 #: Window (pixels of the strided image, each side) in which a track finds its component.
 PROTECT_RADIUS_PX = 3
 
@@ -164,6 +170,7 @@ class BackgroundModel:
         self._near_ref = np.zeros(shape, np.float32)
         self._near_since = np.full(shape, t, np.float64)
         self._learn_until = t + params.background_learn_s
+        self._settling = False
 
     def foreground(self, depth: npt.NDArray[np.floating], candidate: npt.NDArray[np.bool_],
                    stamp_ns: int, params: EndeffParams) -> npt.NDArray[np.bool_]:
@@ -196,9 +203,12 @@ class BackgroundModel:
         if n_known >= MIN_KNOWN_FRACTION * d.size:
             recent_far = farther | (self._far_t > t - RECENT_FAR_S)
             f = params.background_camera_motion_fraction * n_known
+            if self._settling and t < self._learn_until:
+                f /= SETTLING_DIVISOR
             if np.count_nonzero(nearer) >= f and np.count_nonzero(recent_far & known) >= f:
                 self.relearns += 1
                 self._learn(d, valid, t, params)
+                self._settling = True
                 self._labels, _ = depth_components(d, candidate, stride)
                 return candidate.copy()
 

@@ -1,0 +1,310 @@
+"""The static background (core/background.py): learning with the person present, a still
+tracked person, furniture removed and pushed, camera motion, reset.
+
+Scenes are painted straight into 640x480 depth images (flat parts at given depths, a floor
+and a back wall inside the box), so a frame costs well under a millisecond to make and a test
+can run the model for several seconds of 30 Hz stamps.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from endeff_ros.core.background import BackgroundModel, depth_components
+from endeff_ros.core.params import EndeffParams
+from endeff_ros.core.single_frame import estimate_frame
+from endeff_ros.core.tracker import Tracker
+from endeff_ros.core.types import KINECT_640 as K
+from endeff_ros.core.types import RGBDFrame
+
+CAMERA_HEIGHT = 1.1
+WALL_Z = 4.0  # inside the default box (4.3 m): without a background model it is foreground
+PERSON_Z = 2.6
+CHAIR_X, CHAIR_Z = 0.7, 2.2
+DT_NS = 33_333_333
+# The level camera sees little floor in front of the wall (a fifth of the image): more RANSAC
+# hypotheses find it every frame.
+PARAMS = EndeffParams(background_learn_s=0.5, background_absorb_s=1.0, floor_iterations=400)
+
+
+def _v(y: float, z: float) -> int:
+    return int(round(K.cy + K.fy * (CAMERA_HEIGHT - y) / z))
+
+
+def _u(x: float, z: float) -> int:
+    return int(round(K.cx + K.fx * x / z))
+
+
+def room() -> np.ndarray:
+    """Floor (y = 0) and a back wall at WALL_Z, as the camera sees them."""
+    v = np.arange(K.height, dtype=np.float64)[:, None]
+    with np.errstate(divide='ignore'):
+        floor = np.where(v > K.cy, CAMERA_HEIGHT * K.fy / (v - K.cy), np.inf)
+    return np.broadcast_to(np.minimum(floor, WALL_Z), (K.height, K.width)).astype(np.float32)
+
+
+def paint(depth: np.ndarray, x0: float, x1: float, y0: float, y1: float, z: float) -> None:
+    """A flat rectangle (world x0..x1, heights y0..y1) at depth z, in front of what is there."""
+    u0, u1, v0, v1 = _u(x0, z), _u(x1, z), _v(y1, z), _v(y0, z)
+    patch = depth[max(v0, 0):max(v1, 0), max(u0, 0):max(u1, 0)]
+    np.minimum(patch, np.float32(z), out=patch)
+
+
+def add_person(depth: np.ndarray, x: float, arm: float, z: float = PERSON_Z) -> None:
+    """A flat person at (x, z): head, torso, legs, a left arm down and a right arm raised by
+    ``arm`` (0: down along the body, 1: horizontal)."""
+    paint(depth, x - 0.09, x + 0.09, 1.48, 1.70, z)   # head
+    paint(depth, x - 0.18, x + 0.18, 0.90, 1.45, z)   # torso
+    for side in (-1, 1):
+        paint(depth, x + side * 0.12 - 0.06, x + side * 0.12 + 0.06, 0.04, 0.92, z)  # leg
+    paint(depth, x - 0.30, x - 0.20, 0.80, 1.42, z)   # left arm, down
+    reach, drop = 0.10 + 0.55 * arm, 0.62 * (1 - arm)
+    paint(depth, x + 0.18, x + 0.18 + reach, 1.32 - drop, 1.42, z)  # right arm
+
+
+def add_chair(depth: np.ndarray, x: float = CHAIR_X, z: float = CHAIR_Z) -> None:
+    """Legs, seat and backrest of a chair standing on the floor at (x, z)."""
+    for dx in (-0.2, 0.17):
+        paint(depth, x + dx, x + dx + 0.04, 0.03, 0.45, z)           # front legs
+        paint(depth, x + dx, x + dx + 0.04, 0.03, 0.95, z + 0.4)     # back legs and posts
+    paint(depth, x - 0.22, x + 0.22, 0.45, 0.50, z)                  # seat front
+    paint(depth, x - 0.22, x + 0.22, 0.80, 0.95, z + 0.4)            # backrest
+
+
+def frame(k: int, depth: np.ndarray, seed: int | None = None) -> RGBDFrame:
+    """Frame ``k`` of a 30 Hz stream; 3 mm depth noise."""
+    rng = np.random.default_rng(k if seed is None else seed)
+    noisy = depth + rng.normal(0.0, 0.003, depth.shape).astype(np.float32)
+    return RGBDFrame(stamp_ns=k * DT_NS, frame_id='camera', depth=noisy, intrinsics=K)
+
+
+def moving_person_scene(k: int, *, chair_x: float = CHAIR_X, person_x: float | None = None,
+                        arm: float | None = None) -> np.ndarray:
+    """A room with a chair and a person who sways sideways and waves, from frame 0."""
+    depth = room().copy()
+    add_chair(depth, chair_x)
+    add_person(depth, -0.5 + 0.15 * np.sin(k / 9.0) if person_x is None else person_x,
+               0.5 + 0.5 * np.sin(k / 5.0) if arm is None else arm)
+    return depth
+
+
+def points_near(points: np.ndarray, x: float, z: float, half: float = 0.3) -> int:
+    """Foreground points within ``half`` of (x, z) in x and within 0.5 m in depth."""
+    return int(np.count_nonzero((np.abs(points[:, 0] - x) < half)
+                                & (np.abs(points[:, 2] - z - 0.2) < 0.5)))
+
+
+def test_static_scene_without_background_has_furniture_and_wall():
+    """The scenes are hard without the model: chair and wall are foreground."""
+    est = estimate_frame(frame(0, moving_person_scene(0)), PARAMS.replace(background=False))
+    assert points_near(est.points, CHAIR_X, CHAIR_Z) > 50
+    assert np.count_nonzero(est.points[:, 2] > WALL_Z - 0.1) > 500
+
+
+def test_person_present_from_frame_0_is_found_during_and_after_learning():
+    model = BackgroundModel()
+    found = []
+    for k in range(45):  # 1.5 s, learning ends at 0.5 s
+        est = estimate_frame(frame(k, moving_person_scene(k)), PARAMS, background=model)
+        x = -0.5 + 0.15 * np.sin(k / 9.0)
+        found.append((model.learning, points_near(est.points, x, PERSON_Z),
+                      points_near(est.points, CHAIR_X, CHAIR_Z),
+                      int(np.count_nonzero(est.points[:, 2] > WALL_Z - 0.1)),
+                      len(est.entities)))
+    learning = [f for f in found if f[0]]
+    learnt = [f for f in found if not f[0]]
+    assert 15 <= len(learning) <= 16 and len(learnt) >= 29
+    assert all(f[1] > 300 for f in found)  # the person, in every frame
+    assert all(f[2] > 50 and f[3] > 500 for f in learning)  # nothing removed while learning
+    # Learnt: chair and wall gone (the person's far side of the arm stays theirs).
+    assert all(f[2] == 0 and f[3] == 0 and f[4] == 1 for f in learnt[3:])
+
+
+def test_robot_pedestal_stays_with_its_moving_arm():
+    """The whole connected part moves: a static pedestal joined to a moving arm is kept."""
+    model = BackgroundModel()
+    pedestal = []
+    for k in range(45):
+        depth = room().copy()
+        paint(depth, -0.1, 0.1, 0.0, 0.9, 2.5)  # pedestal on the floor
+        angle = 0.8 * np.sin(k / 4.0)  # an arm swinging up and down from its top
+        tip = (0.1 + 0.5 * np.cos(angle), 0.85 + 0.5 * np.sin(angle))
+        arm = np.zeros(depth.shape, np.uint8)
+        cv2.line(arm, (_u(0.1, 2.5), _v(0.85, 2.5)), (_u(tip[0], 2.5), _v(tip[1], 2.5)), 1,
+                 thickness=_u(0.08, 2.5) - _u(0.0, 2.5))
+        depth[arm > 0] = 2.5
+        est = estimate_frame(frame(k, depth), PARAMS, background=model)
+        pedestal.append(int(np.count_nonzero((np.abs(est.points[:, 0]) < 0.1)
+                                             & (est.points[:, 1] > CAMERA_HEIGHT - 0.6))))
+    assert not model.learning
+    assert min(pedestal[-20:]) > 20
+
+
+def _walk_then_stand(tracker_or_model, n_walk: int, n_still: int):
+    """A person walks in front of the wall for ``n_walk`` frames, then stands still."""
+    out = []
+    for k in range(n_walk + n_still):
+        x = -0.9 + 0.9 * min(k, n_walk) / n_walk
+        depth = room().copy()
+        add_person(depth, x, 0.3 if k < n_walk else 0.0)
+        f = frame(k, depth, seed=0 if k >= n_walk else k)  # still: the very same image
+        if isinstance(tracker_or_model, Tracker):
+            result = tracker_or_model.update(f)
+            out.append((points_near(result.estimate.points, 0.0, PERSON_Z),
+                        {t.id for t in result.tracks}))
+        else:
+            est = estimate_frame(f, PARAMS, background=tracker_or_model)
+            out.append((points_near(est.points, 0.0, PERSON_Z), set()))
+    return out
+
+
+def test_still_person_is_not_absorbed_while_tracked():
+    tracker = Tracker(PARAMS)
+    out = _walk_then_stand(tracker, 30, 75)  # still for 2.5 s, absorb time 1 s
+    assert all(n > 300 for n, _ in out[-30:])
+    assert out[-1][1] & out[40][1]  # the same tracks
+    # The same sequence without tracks to protect it: the still person is absorbed.
+    untracked = _walk_then_stand(BackgroundModel(), 30, 75)
+    assert untracked[40][0] > 300 and untracked[-1][0] == 0
+
+
+def test_pushed_chair_becomes_foreground_again():
+    model = BackgroundModel()
+    counts = []
+    for k in range(60):
+        chair_x = CHAIR_X if k < 30 else CHAIR_X + 0.35  # pushed 35 cm at 1 s
+        est = estimate_frame(frame(k, moving_person_scene(k, chair_x=chair_x)), PARAMS,
+                             background=model)
+        counts.append(points_near(est.points, chair_x, CHAIR_Z, 0.25))
+    assert counts[25] == 0  # learnt: the chair is background
+    assert all(c > 50 for c in counts[31:])  # pushed: an entity again, and it stays one
+
+
+def _turned(depth: np.ndarray, yaw: float) -> np.ndarray:
+    """``depth`` as seen by the camera turned right by ``yaw`` (rad) about its vertical axis:
+    every reading back-projected, rotated and z-buffered again (new view: the wall)."""
+    v, u = np.nonzero(np.isfinite(depth))
+    z = depth[v, u].astype(np.float64)
+    x, y = (u - K.cx) * z / K.fx, (v - K.cy) * z / K.fy
+    c, s = np.cos(yaw), np.sin(yaw)
+    x, z = c * x - s * z, s * x + c * z
+    uu = np.round(K.fx * x / z + K.cx).astype(int)
+    vv = np.round(K.fy * y / z + K.cy).astype(int)
+    ok = (z > 0.1) & (uu >= 0) & (uu < K.width) & (vv >= 0) & (vv < K.height)
+    out = np.full(K.height * K.width, np.inf)
+    np.minimum.at(out, vv[ok] * K.width + uu[ok], z[ok])
+    out = out.reshape(K.height, K.width)
+    # The forward warp leaves single-pixel cracks: fill them from the row's neighbours.
+    crack = ~np.isfinite(out)
+    out[:, 1:][crack[:, 1:]] = out[:, :-1][crack[:, 1:]]
+    return np.where(np.isfinite(out), out, WALL_Z).astype(np.float32)
+
+
+def _turn(x: float, z: float, yaw: float) -> tuple[float, float]:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return c * x - s * z, s * x + c * z
+
+
+def _pan(background: bool) -> tuple[Tracker, dict[int, set[int]], list[int]]:
+    """A 20 degree pan over 1 s from frame 40 (raised cosine, as a pan-tilt head) of the room
+    with the chair and a swaying person. Returns the tracker, the ids of the person's tracks
+    per frame, and the chair's foreground points from 2 s after the turn on."""
+    tracker = Tracker(PARAMS.replace(background_learn_s=1.0, background=background))
+    static = room().copy()
+    add_chair(static)
+    turned: dict[float, np.ndarray] = {}
+    ids: dict[int, set[int]] = {}
+    chair_after = []
+    total = np.radians(20.0)
+    for k in range(135):
+        s = np.clip((k - 40) / 30, 0.0, 1.0)
+        yaw = round(float(total * 0.5 * (1 - np.cos(np.pi * s))), 4)
+        if yaw not in turned:
+            turned[yaw] = _turned(static, yaw) if yaw else static
+        depth = turned[yaw].copy()
+        x, z = _turn(-0.4 + 0.1 * np.sin(k / 6.0), PERSON_Z, yaw)
+        add_person(depth, x, 0.4, z)
+        result = tracker.update(frame(k, depth))
+        ids[k] = {t.id for t in result.tracks
+                  if abs(t.position[0] - x) < 0.8 and abs(t.position[2] - z) < 0.25}
+        cx, cz = _turn(CHAIR_X, CHAIR_Z, yaw)
+        if background and k == 40:
+            assert points_near(result.estimate.points, cx, cz) == 0  # learnt before the turn
+        if k >= 70 + 60:  # 2 s after the turn ended
+            chair_after.append(points_near(result.estimate.points, cx, cz))
+    return tracker, ids, chair_after
+
+
+def test_camera_pan_relearns_and_keeps_the_tracks():
+    """The background is re-learnt after the turn, the chair is gone 2 s after it, and the
+    person keeps every track id the tracker keeps without a background. (Without colour
+    images the tracker predicts no motion, so the turn is slower than a robot's head would
+    make it; with colour the optical flow follows faster turns.)"""
+    tracker, ids, chair_after = _pan(True)
+    assert tracker.background.relearns >= 1
+    assert chair_after and max(chair_after) == 0
+    _, ids_off, chair_off = _pan(False)
+    assert min(chair_off) > 50
+    kept, kept_off = ids[40] & ids[134], ids_off[40] & ids_off[134]
+    assert kept and kept >= kept_off
+
+
+def test_person_moving_does_not_count_as_camera_motion():
+    model = BackgroundModel()
+    for k in range(90):
+        x = -1.0 + 2.0 * k / 90  # walks across the room, 0.67 m/s
+        depth = room().copy()
+        add_person(depth, x, 0.5 + 0.5 * np.sin(k / 5.0), z=1.6)
+        estimate_frame(frame(k, depth), PARAMS, background=model)
+    assert model.relearns == 0
+
+
+def test_reset_relearns_and_keeps_tracks():
+    tracker = Tracker(PARAMS)
+    for k in range(30):
+        tracker.update(frame(k, moving_person_scene(k)))
+    assert not tracker.background.learning
+    ids = {t.id for t in tracker.update(frame(30, moving_person_scene(30))).tracks}
+    tracker.reset_background()
+    result = tracker.update(frame(31, moving_person_scene(31)))
+    assert tracker.background.learning and tracker.background.resets == 1
+    assert points_near(result.estimate.points, CHAIR_X, CHAIR_Z) > 50  # learning again
+    assert ids & {t.id for t in result.tracks}
+    tracker.reset()  # a time jump keeps the background ...
+    assert tracker.background.background is not None
+    tracker.reset(forget_ids=True)  # ... a fresh start does not
+    assert tracker.background.background is None
+
+
+def test_background_off_leaves_the_cloud_alone():
+    tracker = Tracker(PARAMS.replace(background=False))
+    for k in range(30):
+        result = tracker.update(frame(k, moving_person_scene(k)))
+    assert points_near(result.estimate.points, CHAIR_X, CHAIR_Z) > 50
+    assert tracker.background.background is None
+
+
+def test_components_split_at_depth_edges():
+    depth = room().copy()
+    add_chair(depth)
+    add_person(depth, CHAIR_X - 0.45, 0.5, z=CHAIR_Z - 0.4)  # overlapping the chair's left
+    mask = np.isfinite(depth) & (depth < WALL_Z - 0.05)
+    labels, far = depth_components(depth, mask, 1)
+    person = labels[_v(1.2, CHAIR_Z - 0.4), _u(CHAIR_X - 0.45, CHAIR_Z - 0.4)]
+    seat = labels[_v(0.47, CHAIR_Z), _u(CHAIR_X, CHAIR_Z)]
+    assert person > 0 and seat > 0 and person != seat
+    assert far.any() and not (far & ~mask).any()
+
+
+@pytest.mark.parametrize('bad', [np.nan, 0.0, 1e6])
+def test_no_reading_is_never_background_or_foreground(bad):
+    model = BackgroundModel()
+    depth = moving_person_scene(0)
+    depth[:, :50] = bad
+    candidate = np.ones((K.height, K.width), dtype=bool)
+    for k in range(3):
+        keep = model.foreground(depth, candidate, k * DT_NS, PARAMS.replace(pixel_stride=1))
+    assert keep.shape == depth.shape
+    assert np.all(model.background[:, :50] == 0)
