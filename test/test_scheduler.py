@@ -7,7 +7,12 @@ from dataclasses import dataclass
 import pytest
 
 from endeff_ros.core.params import EndeffParams
-from endeff_ros.ros.scheduler import CAMERA_INFO_GRACE_S, Early, Scheduler
+from endeff_ros.ros.scheduler import (
+    CAMERA_INFO_GRACE_S,
+    COLOR_STOPPED_FRAMES,
+    Early,
+    Scheduler,
+)
 
 MS = 1_000_000
 
@@ -242,13 +247,68 @@ def test_every_depth_image_is_answered_when_colour_images_are_lost() -> None:
 
 
 def test_without_colour_depth_images_do_not_wait_for_the_timeout() -> None:
+    """No colour at all: the first depth images wait (colour may still come); once colour
+    counts as stopped they are answered, oldest first, and every later one on arrival."""
     s = make(color_timeout_s=10.0)
     feed(s, 'camera_info', 0)
-    done = _stream(s, 10, color=False)
-    # The first few wait (colour may still come); after that each is answered on arrival.
-    from endeff_ros.ros.scheduler import COLOR_STOPPED_FRAMES
+    stamps = [round((1000.0 + k * 33.3) * MS) for k in range(10)]
+    done = []
+    for k, stamp in enumerate(stamps):
+        s.on_input('depth', Msg('depth', stamp), k * 0.0333)
+        done.append([args[0]['depth'].stamp for job, args in drain(s) if job == 'process'])
+    assert done[:COLOR_STOPPED_FRAMES] == [[]] * COLOR_STOPPED_FRAMES
+    assert done[COLOR_STOPPED_FRAMES] == stamps[:COLOR_STOPPED_FRAMES + 1]
+    assert done[COLOR_STOPPED_FRAMES + 1:] == [[t] for t in stamps[COLOR_STOPPED_FRAMES + 1:]]
+    assert s.stats.colorless == 10 and s.skipped == 0
 
-    assert done == [round((1000.0 + k * 33.3) * MS) for k in range(COLOR_STOPPED_FRAMES, 10)]
+
+def test_a_colour_timeout_hands_on_every_waiting_depth_image_in_order() -> None:
+    s = make(color_timeout_s=0.1)
+    feed(s, 'camera_info', 0)
+    feed(s, 'depth', 1000.0, receipt=1.0)
+    feed(s, 'depth', 1033.3, receipt=1.033)
+    s.flush_colorless(1.2)  # both waited longer than the timeout
+    jobs = [(job, args[0]['depth'].stamp, args[1]) for job, args in drain(s)
+            if job == 'process']
+    assert jobs == [('process', 1000 * MS, 1.0), ('process', round(1033.3 * MS), 1.033)]
+    assert s.stats.colorless == 2 and s.skipped == 0
+
+
+def test_colourless_sets_wait_in_order_behind_a_busy_worker_and_stay_bounded() -> None:
+    """While the worker is busy, sets whose colour is lost queue oldest first, before a newer
+    complete set; beyond ``COLOR_STOPPED_FRAMES`` queued behind the slot's, the oldest are
+    skipped and counted."""
+    s = make(color_timeout_s=10.0)
+    feed(s, 'camera_info', 0)
+    for first, color in ((1000.0, 1100.0), (1133.3, 1233.3)):
+        for k in range(3):  # three depth images whose colour never comes, then a newer colour
+            feed(s, 'depth', first + 33.3 * k)
+        feed(s, 'color', color)
+    feed(s, 'depth', 1300.0)
+    feed(s, 'color', 1301.0)  # a complete set, newer than all of them
+    done = [args[0]['depth'].stamp for job, args in drain(s) if job == 'process']
+    # the first in the slot, the 3 newest queued; the 2 between are skipped
+    assert COLOR_STOPPED_FRAMES == 3
+    assert done == [round(t * MS) for t in (1000.0, 1133.3, 1166.6, 1199.9, 1300.0)]
+    assert s.skipped == 2 and s.stats.colorless == 6
+
+
+def test_a_reset_forgets_the_queued_colourless_sets() -> None:
+    s = make(color_timeout_s=0.1)
+    feed(s, 'camera_info', 0)
+    for k in range(3):
+        feed(s, 'depth', 1000.0 + 33.3 * k, receipt=1.0)
+    s.flush_colorless(2.0)  # three queued, none taken yet
+    s.request_reset()
+    assert [job for job, _ in drain(s) if job == 'process'] == []
+    # After the reset a set whose colour is lost is still served, before a newer complete set.
+    feed(s, 'color', 1150.0, receipt=2.9)
+    feed(s, 'depth', 1200.0, receipt=3.0)
+    feed(s, 'color', 1300.0, receipt=3.03)  # the colour of 1200 is lost
+    feed(s, 'depth', 1333.3, receipt=3.06)
+    feed(s, 'color', 1334.0, receipt=3.06)
+    assert [args[0]['depth'].stamp for job, args in drain(s) if job == 'process'] == [
+        1200 * MS, round(1333.3 * MS)]
 
 
 def test_one_stamp_far_ahead_is_quarantined_and_resets_nothing() -> None:

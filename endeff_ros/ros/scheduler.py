@@ -18,7 +18,11 @@ tested by feeding stamped messages (as the synchroniser is), with no DDS:
   or the colour stream has stopped (``COLOR_STOPPED_FRAMES`` depth images in a row without
   any colour), so that with no colour at all no frame waits. Such a set goes into a slot of
   its own that the worker serves before the newest complete set, so that neither replaces
-  the other.
+  the other. Every depth image waiting at that moment is handed on, oldest first: when colour
+  stops, the images that waited to see whether it would come are answered too (at most
+  ``COLOR_STOPPED_FRAMES`` such sets wait behind the slot's, so that work stays bounded); a
+  depth image arriving once colour has stopped is an ordinary set (newest wins), as without
+  a colour input.
 - **Order and resets.** A set whose depth is not newer than one already handed on is a
   duplicate. Stamps going back by more than the jump threshold (a bag replayed in a loop), or
   the ROS clock jumping back, reset the tracker and the synchroniser. A single stamp more
@@ -34,6 +38,7 @@ from __future__ import annotations
 
 import dataclasses
 import threading
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -101,6 +106,11 @@ class Scheduler:
         self._slot: LatestSlot[tuple[dict[str, Any], float]] = LatestSlot()
         # Sets whose colour image is known to be lost (served before the newest set).
         self._lost: LatestSlot[tuple[dict[str, Any], float]] = self._slot.companion()
+        # Such sets queued behind the one in the lost slot (oldest first), and the set last
+        # put in the slot (None once the worker took it): the slot holds one at a time.
+        self._lost_backlog: deque[tuple[dict[str, Any], float]] = deque()
+        self._lost_item: tuple[dict[str, Any], float] | None = None
+        self._lost_replaced = 0
         # Depth images (with the camera info) waiting for the early Sections 3-4, colour images
         # waiting for the early flow; the last early result of each.
         self._early: LatestSlot[tuple[Any, Any]] = self._slot.companion()
@@ -167,7 +177,7 @@ class Scheduler:
     @property
     def skipped(self) -> int:
         """Sets replaced in their slot before the worker took them."""
-        return self._slot.skipped + self._lost.skipped
+        return self._slot.skipped + self._lost.skipped + self._lost_replaced
 
     @property
     def sets(self) -> int:
@@ -179,7 +189,6 @@ class Scheduler:
         """Take one message of input ``kind`` received at ``receipt`` (monotonic s).
         ``flow_done``: a colour image whose flow the caller already computed (no early flow)."""
         stamp = self._stamp_of(msg)
-        lost = None
         with self._lock:
             self.stats.received[kind] += 1
             if kind == 'camera_info':
@@ -189,25 +198,29 @@ class Scheduler:
                 return
             if kind == 'depth' and self._first_unpaired_depth is None:
                 self._first_unpaired_depth = receipt
+            alone = []  # a depth image that is a set by itself (colour has stopped)
             if kind == 'color':
                 self._depth_since_color = 0
                 # Depth images that can no longer pair with any colour image lost theirs.
-                lost = self._hand_on_colorless(
-                    [s for s in self._waiting if s < stamp - self._slop_ns], 'lost')
+                self._queue_lost(self._hand_on_colorless(
+                    [s for s in self._waiting if s < stamp - self._slop_ns], 'lost'))
             if kind == 'depth' and 'color' in self.inputs:
                 self._depth_since_color += 1
                 self._waiting[stamp] = (msg, receipt)
                 if self._depth_since_color > COLOR_STOPPED_FRAMES:
-                    lost = self._hand_on_colorless([stamp], 'stopped')
+                    # Those that waited to see whether colour would come are answered first;
+                    # this one, which did not wait, is an ordinary set (newest wins).
+                    batch = self._hand_on_colorless([s for s in self._waiting if s <= stamp],
+                                                    'stopped')
+                    alone = [m for m, _ in batch[-1:] if self._stamp_of(m['depth']) == stamp]
+                    self._queue_lost(batch[:len(batch) - len(alone)])
                 elif self._last_info is not None:
                     self._early.put((msg, self._last_info))
-            ready = [self._claim(dict(zip(self.inputs, found)))
-                     for found in self._sync.add(self.inputs.index(kind), stamp, msg)]
+            ready = alone + [self._claim(dict(zip(self.inputs, found)))
+                             for found in self._sync.add(self.inputs.index(kind), stamp, msg)]
             if (kind == 'color' and not ready and not flow_done
                     and self._last_info is not None):
                 self._early_color.put((msg, self._last_info))
-        if lost is not None:
-            self._lost.put(lost)
         for msgs in ready:
             if msgs is not None:
                 self._slot.put((msgs, receipt))
@@ -238,20 +251,38 @@ class Scheduler:
         return True
 
     def _hand_on_colorless(self, stamps: list[int], why: str
-                           ) -> tuple[dict[str, Any], float] | None:
-        """The set of the newest of these waiting depth images, without colour (lock held);
-        older ones are forgotten. None if there is none or no camera info yet."""
+                           ) -> list[tuple[dict[str, Any], float]]:
+        """The sets of these waiting depth images without colour, oldest first, with their
+        receipts (lock held); none before the camera info has come."""
         if not stamps or self._last_info is None:
-            return None
-        msg, receipt = self._waiting[max(stamps)]
-        for stamp in stamps:
-            del self._waiting[stamp]
-        msgs = self._claim({'color': None, 'depth': msg, 'camera_info': self._last_info})
-        if msgs is None:
-            return None
-        self.stats.colorless += 1
-        self._on_warning(f'color_{why}', _COLORLESS_WHY[why])
-        return msgs, receipt
+            return []
+        batch = []
+        for stamp in sorted(stamps):
+            msg, receipt = self._waiting[stamp]
+            msgs = self._claim({'color': None, 'depth': msg, 'camera_info': self._last_info})
+            if msgs is not None:
+                batch.append((msgs, receipt))
+        if batch:
+            self.stats.colorless += len(batch)
+            self._on_warning(f'color_{why}', _COLORLESS_WHY[why])
+        return batch
+
+    def _queue_lost(self, batch: list[tuple[dict[str, Any], float]]) -> None:
+        """Queue sets whose colour is lost behind those already queued (lock held); the
+        queue holds at most ``COLOR_STOPPED_FRAMES`` sets besides the one in the slot (the
+        oldest beyond are skipped), so that its work stays bounded."""
+        self._lost_backlog.extend(batch)
+        while len(self._lost_backlog) > COLOR_STOPPED_FRAMES:
+            self._lost_backlog.popleft()
+            self._lost_replaced += 1
+        self._feed_lost()
+
+    def _feed_lost(self) -> None:
+        """The next queued set into the lost slot, once the worker took the previous one
+        (lock held)."""
+        if self._lost_item is None and self._lost_backlog:
+            self._lost_item = self._lost_backlog.popleft()
+            self._lost.put(self._lost_item)
 
     def _claim(self, msgs: dict[str, Any]) -> dict[str, Any] | None:
         """Accept a set unless its depth is not newer than one already handed on (lock held)."""
@@ -265,12 +296,11 @@ class Scheduler:
         return msgs
 
     def flush_colorless(self, now: float) -> None:
-        """Hand on the newest depth image that waited ``color_timeout_s`` for its colour."""
+        """Hand on the depth images that waited ``color_timeout_s`` for their colour."""
         with self._lock:
-            lost = self._hand_on_colorless([s for s, (_, t) in self._waiting.items()
-                                            if now - t > self.color_timeout_s], 'late')
-        if lost is not None:
-            self._lost.put(lost)
+            self._queue_lost(self._hand_on_colorless(
+                [s for s, (_, t) in self._waiting.items() if now - t > self.color_timeout_s],
+                'late'))
 
     def missing_camera_info(self, now: float) -> bool:
         """Depth images have waited more than ``CAMERA_INFO_GRACE_S`` with no camera info."""
@@ -287,6 +317,8 @@ class Scheduler:
         self._replace_sync()
         self._slot.clear()
         self._lost.clear()
+        self._lost_backlog.clear()
+        self._lost_item = None
 
     def request_reset(self) -> None:
         """Reset the tracker before the next set, and forget the pending inputs."""
@@ -315,6 +347,11 @@ class Scheduler:
         ``timeout`` s without any, or once closed."""
         got = take_first([self._lost, self._slot, self._early, self._early_color],
                          timeout=timeout)
+        if got is not None and got[0] == 0:
+            with self._lock:
+                if got[1] is self._lost_item:
+                    self._lost_item = None
+                self._feed_lost()
         return None if got is None else (JOBS[got[0]], got[1])
 
     def begin_estimate(self, depth: Any) -> bool:
