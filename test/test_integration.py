@@ -265,3 +265,17 @@ def test_compare_drops_runs_the_three_colour_cases(bag):
         for q in ('p50', 'p95'):
             assert result['differences'][name][f'{q}_ms'] == pytest.approx(
                 cases[name]['node'][f'latency_ms_{q}'] - base[f'latency_ms_{q}'], abs=1e-3)
+
+
+def test_without_a_colour_topic_the_first_depth_frames_are_answered_too(bag):
+    """Open loop at 12 Hz (the node has time for every frame even on a busy machine) with no
+    colour topic: the depth images that waited to see whether colour would come are
+    answered when it counts as stopped, so every depth image has an output."""
+    from tools.latency_bench import ros_latency_bench
+
+    result = ros_latency_bench(bag, rate_hz=12.0, loops=1, no_color=True)
+    node = result['node']
+    assert result['color'] == 'none'
+    assert node['color_dropped']['frames_sent'] == node['frames_sent'] - 1  # 1 unpaired in the bag
+    assert node['outputs'] == node['frames_sent'], result
+    assert int(result['node_diagnostics']['skipped']) == 0
