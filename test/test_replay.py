@@ -229,3 +229,8 @@ def test_compare_drops_runs_the_three_cases_in_turn(monkeypatch):
     assert cases['drop_color_1_in_10']['node']['color_dropped']['frames_sent'] == 2
     assert result['differences'] == {'drop_color_1_in_10': {'p50_ms': 1.0, 'p95_ms': 2.0},
                                      'no_color': {'p50_ms': 2.0, 'p95_ms': 4.0}}
+    assert result['targets']['drop_color_1_in_10'] == {
+        'percentile': 'p95', 'limit_ms': 5.0, 'met': True, 'every_frame_answered': True}
+    assert result['targets']['no_color']['met'] is True  # 2 ms over, 10 allowed
+    monkeypatch.setattr(bench, 'DROP_TARGETS', {'no_color': ('p50', 1.5)})
+    assert bench.compare_drops('bag', rounds=2)['targets']['no_color']['met'] is False
