@@ -141,6 +141,8 @@ class Tracker:
     def estimate(self, frame: RGBDFrame) -> FrameEstimate:
         """Sections 3-4 of ``frame`` with this tracker's floor: the first step of
         :meth:`update`, which a caller may run early (depth needs no colour) and pass on."""
+        if not self.params.background:
+            self.background.reset()  # learnt afresh if it is turned on again
         return estimate_frame(frame, self.params, floor=self._floor,
                               background=self.background if self.params.background else None)
 

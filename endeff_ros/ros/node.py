@@ -33,6 +33,7 @@ from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
+from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from endeff_ros.core.errors import InputError, ParameterError
@@ -128,6 +129,8 @@ class EndeffNode(Node):
             JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1),
                           on_clock_change=False), post_callback=self._on_clock_jump)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.srv_reset_background = self.create_service(Trigger, '~/reset_background',
+                                                        self.reset_background)
         self._worker = threading.Thread(target=self._run, name='endeff_worker', daemon=True)
         self._worker.start()
 
@@ -203,6 +206,23 @@ class EndeffNode(Node):
     def _on_clock_jump(self, jump: Any) -> None:
         if jump.delta.nanoseconds < 0:
             self.scheduler.request_reset()
+
+    def reset_background(self, _request: Any, response: Any) -> Any:
+        """``~/reset_background`` (std_srvs/Trigger): the static background is re-learnt from
+        the next frame; the tracks are kept. Only sets a flag the worker reads, so it needs
+        no lock."""
+        reset = getattr(self.tracker, 'reset_background', None)
+        if reset is None:
+            response.success = False
+            response.message = 'this tracker has no static background'
+            return response
+        reset()
+        response.success = True
+        response.message = ('the background is re-learnt from the next frame' if
+                            self.params.background else 'the background is off (parameter '
+                            'background): it will be learnt afresh when turned on')
+        self.get_logger().info(f'reset_background: {response.message}')
+        return response
 
     def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:
         changes = {p.name: p.value for p in params}
