@@ -117,6 +117,27 @@ def test_a_pair_renders_the_same_person_and_only_adds_furniture(clips, specs):
             assert box(ff.depth).sum() > box(fe.depth).sum() + 2000
 
 
+def test_furniture_finds_room_beside_two_people_walking_across():
+    """Two walks across the whole view at 1.4 and 2.25 m: the lines of sight to them leave no
+    place near them, so the pieces go deeper into the foreground box; they still hide no one."""
+    walk = walk_clip(90, 1.3, 'walk_x')
+    people = (PersonSpec('walk_x', 0, BodyStyle(), View('across', 1.4, 1.2), 1),
+              PersonSpec('walk_x', 0, BodyStyle(), View('across', 2.25, 1.2, side_sign=-1), 2))
+    spec = BagSpec('two', people, 90, 'furnished', 'none', 'kinect_v2', 7, {},
+                   furnish='beside')
+    ren = BagRenderer(spec, {'walk_x': walk})
+    assert len(ren.clutter) >= 2
+    seen = 0
+    for index in (0, 30, 60, 89):
+        ent, _ = ren.entity(index)
+        bare, room = render(ent, ren.camera), render(ent, ren.camera, ren.static)
+        person = bare.owner >= 0
+        np.testing.assert_array_equal(room.owner >= 0, person)
+        np.testing.assert_array_equal(room.z[person], bare.z[person])
+        seen += int((room.owner == STATIC).sum())
+    assert seen > 4000
+
+
 def _still_spec(pan: Pan | None, frames: int = 16) -> tuple[BagSpec, dict]:
     """One person standing still (the first pose of a walk held), seen from the front."""
     walk = walk_clip(30)

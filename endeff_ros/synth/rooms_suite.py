@@ -3,11 +3,14 @@
 A static background model is judged by what the furniture costs: the same person scored with
 and without it. Each *pair* renders one clip segment, body, view, sensor, people and seed twice
 with ``suite.BagRenderer``: once in an empty room (floor and far wall) and once furnished with
-3-5 pieces (table, chair, shelf, floor lamp, boxes; ``room.scatter``) standing beside or behind
-the people, in the camera's field of view and inside the default foreground box
+up to 5 pieces (table, chair, shelf, floor lamp, boxes; ``room.scatter``) standing beside or
+behind the people, in the camera's field of view and inside the default foreground box
 (``suite.BagSpec.furnish == 'beside'``: off their paths and off the lines of sight from the
-camera to them, so a piece never hides a person). The person's ground truth, the dropped
-frames and the stamps are the same in both bags; the furnished one adds static clutter only.
+camera to them, so a piece never hides a person; when that leaves fewer than two pieces, as
+near people walking across the view do, more are placed deeper in the box and closer to the
+people; two people filling the whole view may leave none). The person's ground truth, the
+dropped frames and the stamps are the same in both bags; the furnished one adds static clutter
+only.
 
 *Pan* pairs are longer bags with the same two rooms in which the camera turns once
 (``pan.Pan``: 20-30 degrees of yaw over 0.5 s, starting 1.5 s in, still afterwards) while one

@@ -387,8 +387,17 @@ class BagRenderer:
                 intr = self.model.intrinsics
                 half_fov = float(np.arctan2(0.5 * intr.width, intr.fx)) - np.deg2rad(4.0)
                 clear = np.concatenate([clear, sight_lines(clear[::3])])
-                out += scatter(rng, clear, int(rng.integers(3, 6)), (-1.5, 1.5), z_range,
-                               half_fov=half_fov)
+                pieces = scatter(rng, clear, int(rng.integers(3, 6)), (-1.5, 1.5), z_range,
+                                 half_fov=half_fov)
+                if len(pieces) < 2:
+                    # The people and the lines of sight to them fill the room near them (a
+                    # walk across, two people): use the whole depth of the foreground box and
+                    # a smaller clearance, away from every part of the pieces already placed.
+                    parts = [p.center[[0, 2]] for _, ps in pieces for p in ps]
+                    more = scatter(rng, np.concatenate([clear, np.reshape(parts, (-1, 2))]),
+                                   6, (-1.5, 1.5), (-4.2, -0.9), clear_m=0.2, half_fov=half_fov)
+                    pieces += more[:3 - len(pieces)]
+                out += pieces
             else:
                 out += scatter(rng, clear, int(rng.integers(2, 5)), (-1.5, 1.5), z_range)
         return out
