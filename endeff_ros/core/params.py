@@ -57,7 +57,7 @@ class EndeffParams:
                           'running and drop the connected parts of the foreground that never '
                           'moved (furniture, walls); off for a camera that moves all the time '
                           'or people who never move.')
-    background_learn_s: float = _p(1.0, 'Static background: learning time after the start, a '
+    background_learn_s: float = _p(0.2, 'Static background: learning time after the start, a '
                                    'reset or a camera motion, during which nothing is removed.',
                                    unit='s', lo=0.0, hi=60.0)
     background_margin: float = _p(0.1, 'Static background: a pixel nearer than the background '
