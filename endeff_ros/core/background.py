@@ -98,8 +98,13 @@ MIN_KNOWN_FRACTION = 0.1
 #: the camera is still settling (a pan brakes), and a background taken mid-turn would leave
 #: the furniture's edges "changed" for good.
 SETTLING_DIVISOR = 3.0
+#: Pixels dropped (static) this long at the same depth stay dropped when a moving component
+#: joins them.
+STATIC_S = 0.5
+#: A camera motion carries the tracks that sat on a moving component for at least this long.
+CARRY_AFTER_S = 0.3
 #: Window (pixels of the strided image, each side) in which a track finds its component.
-PROTECT_RADIUS_PX = 3
+PROTECT_RADIUS_PX = 2
 
 
 def depth_components(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_],
@@ -142,6 +147,9 @@ class BackgroundModel:
 
     def _clear(self) -> None:
         self._bg: npt.NDArray[np.float32] | None = None
+        self._fg_ids: dict[int, float] = {}  # tracks that sat on a moving component: since
+        self._carried: set[int] = set()  # those of them alive when the camera moved
+        self._carried_uv = np.zeros((0, 2), np.int64)  # their pixels in the last frame
         self._labels: npt.NDArray[np.int32] | None = None
         self._learn_until = 0.0
         self._last_raw: float | None = None
@@ -184,6 +192,9 @@ class BackgroundModel:
         self._near_since = np.full(shape, t, np.float64)
         self._kept_t = np.full(shape, -np.inf, np.float64)
         self._kept_z = np.zeros(shape, np.float32)
+        self._static_z = np.zeros(shape, np.float32)
+        self._static_since = np.zeros(shape, np.float64)
+        self._moving_labels = np.zeros(1, bool)
         self._learn_until = t + params.background_learn_s
         self._settling = False
 
@@ -221,6 +232,11 @@ class BackgroundModel:
             if self._settling and t < self._learn_until:
                 f /= SETTLING_DIVISOR
             if np.count_nonzero(nearer) >= f and np.count_nonzero(recent_far & known) >= f:
+                if not (self._settling and t < self._learn_until):
+                    # The turn begins (tracks that became foreground as it began sit on
+                    # furniture): these tracks are carried through it.
+                    self._carried |= {i for i, since in self._fg_ids.items()
+                                      if since <= t - CARRY_AFTER_S}
                 self.relearns += 1
                 self._learn(d, valid, t, params)
                 self._settling = True
@@ -265,33 +281,67 @@ class BackgroundModel:
         renew = moving[labels]  # only changed pixels renew the hold
         self._kept_t[renew] = t
         self._kept_z[renew] = d[renew]
+        self._moving_labels = moving
         keep = moving | held
+        keep[self._track_labels(labels, self._carried_uv)] = True
         keep[0] = False
-        return (keep[labels] & candidate) | (edge & changed)
+        fg = keep[labels] & candidate
+        # Certified static: pixels that were dropped for STATIC_S at the same depth stay
+        # dropped when a moving component joins them (furniture a person stands next to).
+        margin_ok = np.abs(d - self._static_z) <= margin
+        start = candidate & ~fg & ~((self._static_z > 0) & margin_ok)
+        self._static_z[start] = d[start]
+        self._static_since[start] = t
+        self._static_z[fg & ~margin_ok] = 0  # that surface is gone
+        static = (self._static_z > 0) & margin_ok & (t - self._static_since >= STATIC_S)
+        return (fg & ~(static & ~changed)) | (edge & changed)
 
-    def protect(self, positions: npt.NDArray[np.float64], intrinsics: Intrinsics,
-                stride: int) -> None:
-        """Restart the absorption clock of the components holding the (N, 3) ``positions``
-        (metres, optical frame: the tracks of the last frame) in that frame's labels, so a
-        tracked entity that stands still is not absorbed. ``stride`` is the pixel stride the
-        last frame was labelled at."""
-        labels = self._labels
-        if labels is None or self._bg is None or len(positions) == 0:
-            return
-        pts = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-        pts = pts[pts[:, 2] > 1e-6]
-        if len(pts) == 0:
-            return
+    def _track_labels(self, labels: npt.NDArray[np.int32],
+                      uv: npt.NDArray[np.int64]) -> npt.NDArray[np.int32]:
+        """Per pixel (u, v) of the strided image, the most frequent label around it (0:
+        none): the component a track's surface anchor lies on."""
+        if len(uv) == 0:
+            return np.zeros(0, np.int32)
         h, w = labels.shape
-        u = np.round((intrinsics.fx * pts[:, 0] / pts[:, 2] + intrinsics.cx) / stride)
-        v = np.round((intrinsics.fy * pts[:, 1] / pts[:, 2] + intrinsics.cy) / stride)
-        ok = np.isfinite(u) & np.isfinite(v)
         r = PROTECT_RADIUS_PX
         offsets = np.arange(-r, r + 1)
-        uu = np.clip(u[ok, None, None].astype(np.int64) + offsets[None, None, :], 0, w - 1)
-        vv = np.clip(v[ok, None, None].astype(np.int64) + offsets[None, :, None], 0, h - 1)
-        hit = np.unique(labels[vv, uu])
-        hit = hit[hit > 0]
-        if hit.size:
-            mask = np.isin(labels, hit)
-            self._near_since[mask] = self._t
+        uu = np.clip(uv[:, 0, None, None] + offsets[None, None, :], 0, w - 1)
+        vv = np.clip(uv[:, 1, None, None] + offsets[None, :, None], 0, h - 1)
+        windows = labels[vv, uu].reshape(len(uv), -1)
+        return np.array([np.bincount(row[row > 0]).argmax() if (row > 0).any() else 0
+                         for row in windows], dtype=np.int32)  # a loop over tracks only
+
+    def protect(self, positions: npt.NDArray[np.float64], ids: list[int],
+                intrinsics: Intrinsics, stride: int) -> None:
+        """Tell the model where the tracks are: ``positions`` (N, 3) metres, optical frame,
+        the surface anchors of the tracks with ``ids`` after the last frame. Their
+        components restart the absorption clock (a tracked person standing still is not
+        absorbed). The tracks that sat on a component with changed pixels when the camera
+        moved keep their components foreground while they live: a person who stands still
+        while the camera turns is not dropped when the learning after the turn ends, while
+        tracks started on furniture during that learning do not count (only a camera motion
+        carries tracks: otherwise a track that once sat on a moving chair would keep it
+        for good). ``stride``: the pixel stride the last frame was labelled at."""
+        labels = self._labels
+        if labels is None or self._bg is None:
+            return
+        pts = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+        track_ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            u = np.round((intrinsics.fx * pts[:, 0] / pts[:, 2] + intrinsics.cx) / stride)
+            v = np.round((intrinsics.fy * pts[:, 1] / pts[:, 2] + intrinsics.cy) / stride)
+        ok = (pts[:, 2] > 1e-6) & np.isfinite(u) & np.isfinite(v)
+        uv = np.stack([u[ok], v[ok]], axis=1).astype(np.int64)
+        track_ids = track_ids[ok]
+        hit = self._track_labels(labels, uv)
+        if hit.any():
+            self._near_since[np.isin(labels, hit[hit > 0])] = self._t
+        if not self.learning:
+            moving = self._moving_labels
+            on_moving = (hit > 0) & (hit < len(moving)) & moving[np.minimum(hit, len(moving) - 1)]
+            for i in track_ids[on_moving].tolist():
+                self._fg_ids.setdefault(i, self._t)
+        alive = set(track_ids.tolist())
+        self._fg_ids = {i: since for i, since in self._fg_ids.items() if i in alive}
+        self._carried &= alive
+        self._carried_uv = uv[np.isin(track_ids, list(self._carried))]

@@ -66,7 +66,7 @@ class EndeffParams:
     background_absorb_s: float = _p(30.0, 'Static background: something nearer than the '
                                     'background and still for this long, holding no track, '
                                     'becomes background.', unit='s', lo=0.1, hi=86400.0)
-    background_camera_motion_fraction: float = _p(0.15, 'Static background: when this fraction '
+    background_camera_motion_fraction: float = _p(0.08, 'Static background: when this fraction '
                                                   'of the pixels is nearer and another such '
                                                   'fraction farther, the camera moved and the '
                                                   'background is re-learnt.', lo=0.01, hi=1.0)

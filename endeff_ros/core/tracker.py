@@ -177,7 +177,8 @@ class Tracker:
         stages['update'] = (time.perf_counter() - t0) * 1e3
         self._prev = frame
         if self.params.background:  # tracked entities are never absorbed by the background
-            self.background.protect(self._anchors(), frame.intrinsics, self.params.pixel_stride)
+            self.background.protect(self._anchors(), [t.id for t in self._tracks],
+                                    frame.intrinsics, self.params.pixel_stride)
         tracks = [self._publish(t) for t in self._tracks]
         return TrackerResult(frame.stamp_ns, frame.frame_id, tracks, estimate, stages)
 
