@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import pytest
@@ -9,6 +10,8 @@ import pytest
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.ros.scheduler import (
     CAMERA_INFO_GRACE_S,
+    COLOR_LAG_MARGIN_S,
+    COLOR_LAG_MIN,
     COLOR_STOPPED_FRAMES,
     Early,
     Scheduler,
@@ -339,3 +342,117 @@ def test_late_messages_are_dropped_with_a_warning() -> None:
     _stream(s, 3)
     feed(s, 'depth', 1000.0)  # older than the last set handed on, within the jump threshold
     assert 'late_input' in warnings
+
+
+PERIOD_S = 0.0333
+
+
+def _lagged_stream(s: Scheduler, frames: int, lag_s, *, drop_color=(), tick_s=0.0005
+                   ) -> list[tuple[int, bool, float]]:
+    """Depth images every ``PERIOD_S`` (receipt k * PERIOD_S, stamp 1000 ms + that), each
+    colour image ``lag_s(k)`` s after its depth image (stamped 2 ms after it; none for
+    ``drop_color``), and a worker calling :meth:`flush_colorless` every ``tick_s``. Returns
+    the sets processed, in order: (depth stamp ns, with colour, seconds after its receipt)."""
+    events = []
+    for k in range(frames):
+        t = k * PERIOD_S
+        events.append((t, 0, 'depth', 1000.0 + t * 1e3))
+        if k not in drop_color:
+            events.append((t + lag_s(k), 0, 'color', 1002.0 + t * 1e3))
+    events += [(j * tick_s, 1, 'flush', 0.0) for j in range(round(frames * PERIOD_S / tick_s))]
+    done = []
+    for t, _, kind, stamp_ms in sorted(events):
+        if kind == 'flush':
+            s.flush_colorless(t)
+        else:
+            feed(s, kind, stamp_ms, receipt=t)
+        done += [(msgs['depth'].stamp, msgs['color'] is not None, t - receipt)
+                 for job, (msgs, receipt, *_) in drain(s) if job == 'process']
+    return done
+
+
+def _stamps(frames: int) -> list[int]:
+    return [round((1000.0 + k * PERIOD_S * 1e3) * MS) for k in range(frames)]
+
+
+def test_the_wait_for_colour_is_learned_from_recent_colour_lags() -> None:
+    """Until ``COLOR_LAG_MIN`` colour images have paired a depth image waits the full
+    ``color_timeout``; then the largest recent lag plus the margin (0 when colour came
+    first)."""
+    s = make(color_timeout_s=0.1)
+    feed(s, 'camera_info', 0)
+    lags = [0.002, 0.005, None, 0.003] + [0.002] * (COLOR_LAG_MIN - 4)  # None: colour first
+    for k, lag in enumerate(lags):
+        t = k * PERIOD_S
+        assert s.color_wait_s() == 0.1
+        if lag is None:
+            feed(s, 'color', 1002 + k * 33.3, receipt=t)
+            feed(s, 'depth', 1000 + k * 33.3, receipt=t + 0.001)
+        else:
+            feed(s, 'depth', 1000 + k * 33.3, receipt=t)
+            feed(s, 'color', 1002 + k * 33.3, receipt=t + lag)
+    assert [j for j, _ in drain(s)].count('process') >= 1
+    assert s.color_wait_s() == pytest.approx(0.005 + COLOR_LAG_MARGIN_S)
+    # The wait never exceeds the timeout.
+    s.color_timeout_s = 0.004
+    assert s.color_wait_s() == 0.004
+
+
+def test_a_lost_colour_is_handed_on_after_the_learned_wait() -> None:
+    """A depth image whose colour is lost is answered once the learned wait has passed, not
+    when the next colour image arrives or after ``color_timeout``; before enough colour
+    images have paired it is answered as before (by the next colour image)."""
+    warnings: list[str] = []
+    s = make(color_timeout_s=0.1, on_warning=lambda kind, text: warnings.append(kind))
+    feed(s, 'camera_info', 0)
+    drops = {3, 13, 23}
+    done = _lagged_stream(s, 30, lambda k: 0.002, drop_color=drops)
+    assert [d for d, _, _ in done] == _stamps(30)  # every one, once, in order
+    assert [k for k, (_, color, _) in enumerate(done) if not color] == sorted(drops)
+    assert s.skipped == 0 and s.stats.colorless == 3 and s.stats.duplicates == 0
+    wait = 0.002 + COLOR_LAG_MARGIN_S
+    assert s.color_wait_s() == pytest.approx(wait)
+    # Frame 3 (before COLOR_LAG_MIN lags): answered when the next colour image arrived.
+    assert done[3][2] == pytest.approx(PERIOD_S + 0.002)
+    for k in (13, 23):  # within a flush tick of the learned wait
+        assert wait < done[k][2] <= wait + 0.0005 + 1e-9
+    assert warnings.count('color_late') == 2 and 'color_too_late' not in warnings
+
+
+@pytest.mark.parametrize(('late_lag', 'missed'), [(0.020, 1), (0.045, 2)])  # < / > a period
+def test_the_wait_grows_back_when_the_colour_lag_grows(late_lag: float, missed: int) -> None:
+    """Colour images arriving later than the learned wait are dropped (their depth images
+    were answered without them), with a warning, but their lag counts: the wait grows, and
+    the next colour images pair again instead of every later frame going without colour."""
+    warnings: list[str] = []
+    s = make(color_timeout_s=0.1, on_warning=lambda kind, text: warnings.append(kind))
+    feed(s, 'camera_info', 0)
+    done = _lagged_stream(s, 30, lambda k: 0.002 if k < 15 else late_lag)
+    assert [d for d, _, _ in done] == _stamps(30)
+    # The first frames with the longer lag go without colour, then all pair again.
+    assert [k for k, (_, color, _) in enumerate(done) if not color] == list(
+        range(15, 15 + missed))
+    assert warnings.count('color_too_late') == missed
+    assert s.color_wait_s() == pytest.approx(late_lag + COLOR_LAG_MARGIN_S)
+    assert s.skipped == 0 and s.stats.colorless == missed
+
+
+def test_the_worker_wakes_when_a_waiting_depth_image_is_due() -> None:
+    """``next_job`` returns (None) when the longest-waiting depth image is due to be handed on,
+    so that the worker's ``flush_colorless`` runs then rather than after its polling timeout;
+    none is due before the camera info has come."""
+    now = [0.0]
+    s = make(color_timeout_s=0.1, clock=lambda: now[0])
+    feed(s, 'depth', 1000, receipt=0.0)
+    assert s.color_due_in(0.0) is None  # no camera info: nothing to hand on yet
+    feed(s, 'camera_info', 0)
+    assert s.color_due_in(0.03) == pytest.approx(0.07)
+    drain(s)
+    now[0] = 0.2  # overdue: the worker must not sleep its full timeout
+    got: list[object] = []
+    worker = threading.Thread(target=lambda: got.append(s.next_job(timeout=60.0)))
+    worker.start()
+    worker.join(timeout=20.0)
+    assert not worker.is_alive() and got == [None]
+    s.flush_colorless(now[0])
+    assert [j for j, _ in drain(s)] == ['process'] and s.color_due_in(now[0]) is None

@@ -13,7 +13,13 @@ tested by feeding stamped messages (as the synchroniser is), with no DDS:
   A result made early (:class:`Early`) serves only the set it was made for, with the parameters
   it was made with, and only if the tracker did not change in between.
 - **Every depth image answered.** A depth image still without colour after ``color_timeout``
-  is handed on alone (as the offline bag reader does); sooner when its colour is known to be
+  is handed on alone (as the offline bag reader does); once ``COLOR_LAG_MIN`` colour images
+  have paired, after the largest of the recent colour lags (how long after its depth image a
+  colour image arrived, 0 if first) plus ``COLOR_LAG_MARGIN_S`` if that is shorter, so that a
+  lost colour image costs about the camera's colour lag rather than the timeout. A colour
+  image arriving after its depth image was handed on is dropped with a warning, but its lag
+  counts, so that the wait grows when the colour lag does (else every later colour image would
+  miss the wait that never grows). Sooner still when its colour is known to be
   lost: a newer colour image has arrived (colour stamps only grow, so it can no longer pair),
   or the colour stream has stopped (``COLOR_STOPPED_FRAMES`` depth images in a row without
   any colour), so that with no colour at all no frame waits. Such a set goes into a slot of
@@ -38,6 +44,7 @@ from __future__ import annotations
 
 import dataclasses
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -52,10 +59,18 @@ CAMERA_INFO_GRACE_S = 0.5
 #: Depth images in a row without any colour image after which colour counts as stopped.
 COLOR_STOPPED_FRAMES = 3
 
+#: Colour lags (receipt of a colour image minus that of its depth image, 0 if the colour came
+#: first) kept, and how many are needed before they set the wait for colour: a window of about
+#: a second at 30 Hz, so that the wait follows a changing lag but one lag sets it for a while.
+COLOR_LAG_WINDOW, COLOR_LAG_MIN = 30, 10
+#: Margin over the largest recent colour lag after which a colour image counts as lost, s:
+#: receipt jitter of a colour image on time stays below it on a loaded machine.
+COLOR_LAG_MARGIN_S = 0.004
+
 _COLORLESS_WHY = {
     'lost': 'a colour image was lost: its depth image is processed without colour',
-    'late': 'a colour image did not arrive within color_timeout: its depth image is processed '
-            'without colour',
+    'late': 'a colour image did not arrive within the wait for colour (color_timeout, or the '
+            'recent colour lag): its depth image is processed without colour',
     'stopped': 'no colour images are arriving: depth images are processed without colour',
 }
 
@@ -86,14 +101,16 @@ class Scheduler:
     colour. ``jump_threshold_ns``: stamps going back by more reset. ``stats``: the node's
     counters (``received``, ``duplicates``, ``colorless``, warnings). ``on_event(text)``:
     informational messages; ``on_warning(kind, text)``: problems with the input (the node logs
-    them, rate-limited per kind).
+    them, rate-limited per kind). ``clock()``: the clock of the receipts, monotonic s (the
+    worker's wait in :meth:`next_job` ends when a waiting depth image is due).
     """
 
     def __init__(self, *, use_color: bool, queue_size: int, slop_ns: int,
                  color_timeout_s: float, jump_threshold_ns: int,
                  stamp_of: Callable[[Any], int], stats: NodeStats | None = None,
                  on_event: Callable[[str], None] | None = None,
-                 on_warning: Callable[[str, str], None] | None = None) -> None:
+                 on_warning: Callable[[str, str], None] | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.inputs = ['color', 'depth', 'camera_info'] if use_color else ['depth',
                                                                             'camera_info']
         self.stats = stats or NodeStats()
@@ -102,6 +119,7 @@ class Scheduler:
         self._stamp_of = stamp_of
         self._on_event = on_event or (lambda text: None)
         self._on_warning = on_warning or (lambda kind, text: None)
+        self._clock = clock
         self._lock = threading.Lock()
         self._slot: LatestSlot[tuple[dict[str, Any], float]] = LatestSlot()
         # Sets whose colour image is known to be lost (served before the newest set).
@@ -126,6 +144,10 @@ class Scheduler:
         # next image of the same input confirms it (one bad frame stamps colour and depth).
         self._ahead: dict[str, int] = {}
         self._depth_since_color = 0  # depth images received since the last colour image
+        self._color_lags: deque[float] = deque(maxlen=COLOR_LAG_WINDOW)  # s, newest last
+        # Receipts of the recent depth images no colour image has come for yet (stamp ->
+        # receipt, oldest first), also once handed on: a late colour image's lag counts.
+        self._depth_receipts: dict[int, float] = {}
         self._reset_pending = False
         self._params_pending: EndeffParams | None = None
         self._waiting: dict[int, tuple[Any, float]] = {}  # depth stamp -> (msg, receipt)
@@ -199,6 +221,7 @@ class Scheduler:
             if kind == 'depth' and self._first_unpaired_depth is None:
                 self._first_unpaired_depth = receipt
             alone = []  # a depth image that is a set by itself (colour has stopped)
+            too_late = kind == 'color' and self._note_color(stamp, receipt)
             if kind == 'color':
                 self._depth_since_color = 0
                 # Depth images that can no longer pair with any colour image lost theirs.
@@ -216,9 +239,13 @@ class Scheduler:
                     self._queue_lost(batch[:len(batch) - len(alone)])
                 elif self._last_info is not None:
                     self._early.put((msg, self._last_info))
-            ready = alone + [self._claim(dict(zip(self.inputs, found)))
-                             for found in self._sync.add(self.inputs.index(kind), stamp, msg)]
-            if (kind == 'color' and not ready and not flow_done
+            found_sets = self._sync.add(self.inputs.index(kind), stamp, msg)
+            if kind == 'depth' and 'color' in self.inputs:
+                depth_at = self.inputs.index('depth')
+                self._note_depth(stamp, receipt,
+                                 paired=any(found[depth_at] is msg for found in found_sets))
+            ready = alone + [self._claim(dict(zip(self.inputs, found))) for found in found_sets]
+            if (kind == 'color' and not ready and not too_late and not flow_done
                     and self._last_info is not None):
                 self._early_color.put((msg, self._last_info))
         for msgs in ready:
@@ -249,6 +276,61 @@ class Scheduler:
         self._ahead.clear()
         self._newest_ns = max(stamp, newest or stamp)
         return True
+
+    def _note_depth(self, stamp: int, receipt: float, *, paired: bool) -> None:
+        """A depth image arrived (lock held): paired at once, its colour came first (lag 0);
+        else its receipt is kept for its colour image's lag (:meth:`_note_color`)."""
+        if paired:
+            self._color_lags.append(0.0)
+            return
+        self._depth_receipts[stamp] = receipt
+        while len(self._depth_receipts) > COLOR_LAG_WINDOW:
+            del self._depth_receipts[next(iter(self._depth_receipts))]
+
+    def _note_color(self, stamp: int, receipt: float) -> bool:
+        """Count a colour image's lag behind its depth partner (lock held): the recent depth
+        image nearest in stamp, within the slop, that no colour image came for yet (none: the
+        colour came first, counted when its depth pairs). True, with a warning, if that depth
+        image was already handed on without colour: this one is too late and is dropped; its
+        lag still counts, so that the wait for colour grows to a growing lag."""
+        near = [s for s in self._depth_receipts if abs(s - stamp) <= self._slop_ns]
+        if not near:
+            return False
+        partner = min(near, key=lambda s: abs(s - stamp))
+        lag = max(0.0, receipt - self._depth_receipts.pop(partner))
+        self._color_lags.append(lag)
+        late = (partner not in self._waiting and self._floor_ns is not None
+                and partner <= self._floor_ns)
+        if late:
+            self._on_warning('color_too_late', f'colour image stamped {stamp / 1e9:.3f} s '
+                             f'arrived {lag * 1e3:.1f} ms after its depth image, which was '
+                             f'processed without it: dropped (the wait for colour grows)')
+        return late
+
+    def color_wait_s(self) -> float:
+        """How long a depth image waits for its colour, s: ``color_timeout_s``, or once
+        ``COLOR_LAG_MIN`` lags are known, the largest recent one plus ``COLOR_LAG_MARGIN_S`` if
+        shorter (a colour image later than every recent one is taken as lost, so that a lost
+        one costs about the colour lag instead of a frame period or the timeout)."""
+        with self._lock:
+            return self._color_wait_s()
+
+    def _color_wait_s(self) -> float:
+        """:meth:`color_wait_s` (lock held)."""
+        lags = self._color_lags
+        if len(lags) < COLOR_LAG_MIN:
+            return self.color_timeout_s
+        return min(self.color_timeout_s, max(lags) + COLOR_LAG_MARGIN_S)
+
+    def color_due_in(self, now: float) -> float | None:
+        """Seconds from ``now`` until the longest-waiting depth image is handed on without
+        colour by :meth:`flush_colorless` (negative: overdue); None if none waits or no camera
+        info has come (then none can be handed on)."""
+        with self._lock:
+            first = min((t for _, t in self._waiting.values()), default=None)
+            if first is None or self._last_info is None:
+                return None
+            return first + self._color_wait_s() - now
 
     def _hand_on_colorless(self, stamps: list[int], why: str
                            ) -> list[tuple[dict[str, Any], float]]:
@@ -296,11 +378,11 @@ class Scheduler:
         return msgs
 
     def flush_colorless(self, now: float) -> None:
-        """Hand on the depth images that waited ``color_timeout_s`` for their colour."""
+        """Hand on the depth images that waited :meth:`color_wait_s` for their colour."""
         with self._lock:
+            wait = self._color_wait_s()
             self._queue_lost(self._hand_on_colorless(
-                [s for s, (_, t) in self._waiting.items() if now - t > self.color_timeout_s],
-                'late'))
+                [s for s, (_, t) in self._waiting.items() if now - t > wait], 'late'))
 
     def missing_camera_info(self, now: float) -> bool:
         """Depth images have waited more than ``CAMERA_INFO_GRACE_S`` with no camera info."""
@@ -313,6 +395,7 @@ class Scheduler:
         """Forget the tracks and the synchroniser state (lock held)."""
         self._reset_pending = True
         self._waiting.clear()
+        self._depth_receipts.clear()
         self._floor_ns = None
         self._replace_sync()
         self._slot.clear()
@@ -344,7 +427,12 @@ class Scheduler:
     def next_job(self, timeout: float) -> tuple[str, tuple[Any, ...]] | None:
         """``(job, args)``: ``('process', (msgs, receipt))``, ``('prepare', (depth, info))``
         or ``('prepare_flow', (color, info))``, preferring complete sets; None after
-        ``timeout`` s without any, or once closed."""
+        ``timeout`` s without any, or once closed; sooner (0.5 ms after) when a waiting depth
+        image is due to be handed on without colour, so that the caller's
+        :meth:`flush_colorless` runs on time rather than after its polling period."""
+        due = self.color_due_in(self._clock())
+        if due is not None:
+            timeout = min(timeout, max(0.0, due + 0.0005))
         got = take_first([self._lost, self._slot, self._early, self._early_color],
                          timeout=timeout)
         if got is not None and got[0] == 0:
