@@ -136,6 +136,8 @@ class SequenceResult:
     scorers: dict[str, SequenceScorer] = field(default_factory=dict)
     stamps_ns: list[int] = field(default_factory=list)
     recalls: dict[str, list[float]] = field(default_factory=dict)
+    #: False positives per scored frame and method (after a camera motion: how soon clean).
+    false_positives: dict[str, list[int]] = field(default_factory=dict)
     topics: str = ''
     stats: dict[str, Any] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
@@ -186,6 +188,8 @@ class SequenceResult:
         out['read_stats'] = self.stats
         out['per_frame'] = {'stamp_ns': list(self.stamps_ns),
                             **{f'{m}_recall': [_jf(r) for r in self.recalls[m]]
+                               for m in METHODS},
+                            **{f'{m}_false_positives': list(self.false_positives[m])
                                for m in METHODS}}
         return out
 
@@ -213,6 +217,7 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
     res = SequenceResult(name=name or bag_name(path), path=str(path),
                          scorers={m: SequenceScorer() for m in METHODS},
                          recalls={m: [] for m in METHODS},
+                         false_positives={m: [] for m in METHODS},
                          seconds={'read': 0.0, 'temporal': 0.0, 'single_frame': 0.0},
                          input_errors={m: 0 for m in METHODS})
     with BagReader(path, options) as bag:
@@ -263,6 +268,7 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
                 score = res.scorers[m].add(est[m], gt, kinds)
                 if score is not None:
                     res.recalls[m].append(score.recall)
+                    res.false_positives[m].append(score.fp)
                     if m == 'temporal':
                         res.predicted_false_positives += _predicted_unmatched(tracks, score)
             if gt is not None:

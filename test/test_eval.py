@@ -70,6 +70,9 @@ def test_scores_bags_of_both_storages(tmp_path: Path) -> None:
         assert s['single_frame']['fpr'] == pytest.approx(0.25)
         assert len(s['per_frame']['temporal_recall']) == s['scored_frames']
         assert len(s['per_frame']['stamp_ns']) == s['scored_frames']
+        # Per frame: no temporal false positive, the single-frame fake's one in every frame.
+        assert s['per_frame']['temporal_false_positives'] == [0] * s['scored_frames']
+        assert s['per_frame']['single_frame_false_positives'] == [1] * s['scored_frames']
     assert report['overall']['single_frame']['fpr'] == pytest.approx(0.25)
     assert report['failed'] == []
     table = format_table(report)
