@@ -100,7 +100,7 @@ MIN_KNOWN_FRACTION = 0.1
 SETTLING_DIVISOR = 3.0
 #: Pixels dropped (static) this long at the same depth stay dropped when a moving component
 #: joins them.
-STATIC_S = 0.5
+STATIC_S = 0.25
 #: A camera motion carries the tracks that sat on a moving component for at least this long.
 CARRY_AFTER_S = 0.3
 #: Window (pixels of the strided image, each side) in which a track finds its component.
@@ -129,6 +129,16 @@ def depth_components(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_]
     _, labels = cv2.connectedComponents((mask & ~far).view(np.uint8), connectivity=4,
                                         ltype=cv2.CV_32S)
     return labels, far
+
+
+def _windows(image: npt.NDArray, uv: npt.NDArray[np.int64]) -> npt.NDArray:
+    """(N, (2r + 1)^2) values of ``image`` around N pixels (u, v), r = PROTECT_RADIUS_PX,
+    clipped at the border."""
+    h, w = image.shape
+    offsets = np.arange(-PROTECT_RADIUS_PX, PROTECT_RADIUS_PX + 1)
+    uu = np.clip(uv[:, 0, None, None] + offsets[None, None, :], 0, w - 1)
+    vv = np.clip(uv[:, 1, None, None] + offsets[None, :, None], 0, h - 1)
+    return image[vv, uu].reshape(len(uv), -1)
 
 
 class BackgroundModel:
@@ -195,17 +205,21 @@ class BackgroundModel:
         self._static_z = np.zeros(shape, np.float32)
         self._static_since = np.zeros(shape, np.float64)
         self._moving_labels = np.zeros(1, bool)
+        self._out = np.zeros(shape, bool)
         self._learn_until = t + params.background_learn_s
         self._settling = False
 
     def foreground(self, depth: npt.NDArray[np.floating], candidate: npt.NDArray[np.bool_],
-                   stamp_ns: int, params: EndeffParams) -> npt.NDArray[np.bool_]:
+                   stamp_ns: int, params: EndeffParams, *,
+                   low: npt.NDArray[np.bool_] | None = None) -> npt.NDArray[np.bool_]:
         """Learn from one frame and return the pixels of ``candidate`` that are foreground.
 
         ``depth`` (H, W) metres (0, NaN: no reading) is the strided image Section 3 builds the
         cloud from (``params.pixel_stride``), ``candidate`` (H, W) its pixels inside the box
-        and off the floor; ``stamp_ns`` the frame's stamp. Returns an (H, W) mask, a subset
-        of ``candidate``.
+        and off the floor; ``stamp_ns`` the frame's stamp; ``low`` (H, W) optional, the
+        candidate pixels just above the floor, which do not connect components (the floor's
+        noisy remnants would join a person's feet to a chair's legs) and are kept next to a
+        kept pixel. Returns an (H, W) mask, a subset of ``candidate``.
         """
         d = np.nan_to_num(np.asarray(depth, dtype=np.float32), nan=0.0, posinf=0.0,
                           neginf=0.0)
@@ -262,7 +276,8 @@ class BackgroundModel:
         bg[absorb] = d[absorb]
         self._bg = bg
 
-        labels, edge = depth_components(d, candidate, stride)
+        upper = candidate if low is None else candidate & ~low
+        labels, edge = depth_components(d, upper, stride)
         self._labels = labels
         if t < self._learn_until:
             return candidate.copy()
@@ -278,7 +293,10 @@ class BackgroundModel:
         # same surface, not the wall an arm swept over).
         recent = (t - self._kept_t <= HOLD_S) & (np.abs(d - self._kept_z) <= margin)
         held = np.bincount(labels[recent], minlength=n) >= HOLD_FRACTION * total
-        renew = moving[labels]  # only changed pixels renew the hold
+        # Only components with changed pixels renew the hold, and not on pixels certifying
+        # as static (furniture that a noisy edge joined to a person for a frame).
+        certifying = (self._static_z > 0) & (np.abs(d - self._static_z) <= margin)
+        renew = moving[labels] & ~certifying
         self._kept_t[renew] = t
         self._kept_z[renew] = d[renew]
         self._moving_labels = moving
@@ -292,9 +310,21 @@ class BackgroundModel:
         start = candidate & ~fg & ~((self._static_z > 0) & margin_ok)
         self._static_z[start] = d[start]
         self._static_since[start] = t
-        self._static_z[fg & ~margin_ok] = 0  # that surface is gone
+        # That surface is gone: something changed in front of it, or it left (a single
+        # flying pixel at an edge does neither: the opening removed it from changed).
+        gone = fg & ~margin_ok & (changed | (d > self._static_z + margin))
+        self._static_z[gone] = 0
         static = (self._static_z > 0) & margin_ok & (t - self._static_since >= STATIC_S)
-        return (fg & ~(static & ~changed)) | (edge & changed)
+        out = (fg & ~(static & ~changed)) | (edge & changed)
+        if low is not None:  # feet: the pixels just above the floor next to kept ones ...
+            box = np.ones((5, 5), np.uint8)
+            hi = cv2.dilate(np.where(out, d, 0).astype(np.float32), box)
+            lo = cv2.erode(np.where(out, d, np.inf).astype(np.float32), box)
+            step = np.float32(EDGE_STEP + EDGE_STEP_Z * 3.0) * stride
+            # ... at their depth (not the wall's foot beside a person's legs)
+            out |= low & candidate & (((d >= lo - step) & (d <= hi + step)) | changed)
+        self._out = out
+        return out
 
     def _track_labels(self, labels: npt.NDArray[np.int32],
                       uv: npt.NDArray[np.int64]) -> npt.NDArray[np.int32]:
@@ -302,12 +332,7 @@ class BackgroundModel:
         none): the component a track's surface anchor lies on."""
         if len(uv) == 0:
             return np.zeros(0, np.int32)
-        h, w = labels.shape
-        r = PROTECT_RADIUS_PX
-        offsets = np.arange(-r, r + 1)
-        uu = np.clip(uv[:, 0, None, None] + offsets[None, None, :], 0, w - 1)
-        vv = np.clip(uv[:, 1, None, None] + offsets[None, :, None], 0, h - 1)
-        windows = labels[vv, uu].reshape(len(uv), -1)
+        windows = _windows(labels, uv)
         return np.array([np.bincount(row[row > 0]).argmax() if (row > 0).any() else 0
                          for row in windows], dtype=np.int32)  # a loop over tracks only
 
@@ -339,6 +364,9 @@ class BackgroundModel:
         if not self.learning:
             moving = self._moving_labels
             on_moving = (hit > 0) & (hit < len(moving)) & moving[np.minimum(hit, len(moving) - 1)]
+            # ... and on a pixel kept as foreground (not on certified-static furniture that a
+            # moving person's component joined).
+            on_moving &= _windows(self._out, uv).any(axis=1)
             for i in track_ids[on_moving].tolist():
                 self._fg_ids.setdefault(i, self._t)
         alive = set(track_ids.tolist())

@@ -264,18 +264,27 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
                               min_fraction=params.floor_min_fraction,
                               iterations=params.floor_iterations, sample=_FLOOR_SAMPLE)
         if floor is not None:
-            keep &= floor.heights(x, y, z) > params.floor_distance
+            height = floor.heights(x, y, z)
+            keep &= height > params.floor_distance
     if background is not None:
         # The model sees every reading of the strided image (walls beyond the box included:
         # a person in front of them changed those pixels), and the box and floor as a mask.
         candidate = np.zeros(valid.shape, dtype=bool)
         candidate[valid] = keep
-        keep = background.foreground(z_image, candidate, stamp_ns, params)[valid]
+        low = None
+        if params.floor_removal and floor is not None:
+            low = np.zeros(valid.shape, dtype=bool)
+            low[valid] = keep & (height < FLOOR_BAND)
+        keep = background.foreground(z_image, candidate, stamp_ns, params, low=low)[valid]
     x, y, z = x[keep], y[keep], z[keep]
     if params.voxel_size <= 0 or len(z) == 0:
         return np.stack([x, y, z], axis=1), floor
     return _voxel_means((x, y, z), params.voxel_size), floor
 
+
+#: Pixels this close to the floor (metres) do not connect the static background's
+#: components: the floor's noisy remnants would join a person's feet to a chair's legs.
+FLOOR_BAND = 0.1
 
 #: Points the floor is fitted on (see :func:`fit_floor`).
 _FLOOR_SAMPLE = 512
