@@ -142,6 +142,28 @@ def test_robot_pedestal_stays_with_its_moving_arm():
     assert min(pedestal[-20:]) > 20
 
 
+def test_furniture_stays_background_when_a_person_stands_beside_it():
+    """A person walks up to the chair and touches it in the image at nearly its depth: their
+    components join, but the chair, certified static before, stays background."""
+    model = BackgroundModel()
+    chair = []
+    for k in range(60):
+        depth = room().copy()
+        add_chair(depth)
+        x = -0.9 + 1.1 * min(k, 40) / 40  # arrives at x = 0.2 at frame 40, then waves
+        add_person(depth, x, 0.5 + 0.5 * np.sin(k / 3.0), z=CHAIR_Z + 0.1)
+        est = estimate_frame(frame(k, depth), PARAMS, background=model)
+        chair.append(int(np.count_nonzero((est.points[:, 0] > CHAIR_X + 0.05)
+                                          & (est.points[:, 0] < CHAIR_X + 0.25)
+                                          & (est.points[:, 1] > CAMERA_HEIGHT - 0.45))))
+        if k == 45:  # the arm reaches over the chair: one component with it
+            labels, _ = depth_components(np.nan_to_num(depth[::2, ::2]), np.isfinite(
+                depth[::2, ::2]) & (depth[::2, ::2] < WALL_Z - 0.05), 2)
+            assert labels[_v(1.2, CHAIR_Z) // 2, _u(x, CHAIR_Z) // 2] == labels[
+                _v(0.3, CHAIR_Z) // 2, _u(CHAIR_X + 0.15, CHAIR_Z) // 2]
+    assert max(chair[20:]) == 0
+
+
 def _walk_then_stand(tracker_or_model, n_walk: int, n_still: int):
     """A person walks in front of the wall for ``n_walk`` frames, then stands still."""
     out = []
