@@ -320,7 +320,7 @@ def test_components_split_at_depth_edges():
     assert far.any() and not (far & ~mask).any()
 
 
-@pytest.mark.parametrize('bad', [np.nan, 0.0, 1e6])
+@pytest.mark.parametrize('bad', [np.nan, 0.0, np.inf])
 def test_no_reading_is_never_background_or_foreground(bad):
     model = BackgroundModel()
     depth = moving_person_scene(0)
@@ -330,3 +330,16 @@ def test_no_reading_is_never_background_or_foreground(bad):
         keep = model.foreground(depth, candidate, k * DT_NS, PARAMS.replace(pixel_stride=1))
     assert keep.shape == depth.shape
     assert np.all(model.background[:, :50] == 0)
+
+
+def test_protect_with_no_usable_track_position():
+    """Tracks whose anchors project nowhere (behind the camera, NaN) protect nothing and do
+    not fail (an empty set of pixel windows)."""
+    tracker = Tracker(PARAMS)
+    for k in range(30):
+        tracker.update(frame(k, moving_person_scene(k)))
+    model = tracker.background
+    assert not model.learning
+    model.protect(np.array([[0.0, 0.0, -1.0], [np.nan, 0.0, 2.0]]), [1, 2], K, 2)
+    model.protect(np.zeros((0, 3)), [], K, 2)
+    assert tracker.update(frame(30, moving_person_scene(30))).tracks

@@ -73,7 +73,6 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from .cloud import MAX_RANGE_M
 from .params import EndeffParams
 
 if TYPE_CHECKING:
@@ -148,7 +147,7 @@ def _windows(image: npt.NDArray, uv: npt.NDArray[np.int64]) -> npt.NDArray:
     offsets = np.arange(-PROTECT_RADIUS_PX, PROTECT_RADIUS_PX + 1)
     uu = np.clip(uv[:, 0, None, None] + offsets[None, None, :], 0, w - 1)
     vv = np.clip(uv[:, 1, None, None] + offsets[None, :, None], 0, h - 1)
-    return image[vv, uu].reshape(len(uv), -1)
+    return image[vv, uu].reshape(len(uv), len(offsets) ** 2)
 
 
 class BackgroundModel:
@@ -224,7 +223,8 @@ class BackgroundModel:
                    low: npt.NDArray[np.bool_] | None = None) -> npt.NDArray[np.bool_]:
         """Learn from one frame and return the pixels of ``candidate`` that are foreground.
 
-        ``depth`` (H, W) metres (0, NaN: no reading) is the strided image Section 3 builds the
+        ``depth`` (H, W) metres (0, NaN, inf: no reading; the caller zeroes readings beyond the
+        sensor's range) is the strided image Section 3 builds the
         cloud from (``params.pixel_stride``), ``candidate`` (H, W) its pixels inside the box
         and off the floor; ``stamp_ns`` the frame's stamp; ``low`` (H, W) optional, the
         candidate pixels just above the floor, which do not connect components (the floor's
@@ -233,7 +233,7 @@ class BackgroundModel:
         """
         d = np.nan_to_num(np.asarray(depth, dtype=np.float32), nan=0.0, posinf=0.0,
                           neginf=0.0)
-        valid = (d > 0) & (d <= MAX_RANGE_M)
+        valid = d > 0
         d[~valid] = 0
         t = self._clock(stamp_ns)
         stride = params.pixel_stride
