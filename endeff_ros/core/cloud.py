@@ -275,6 +275,7 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
         if params.floor_removal and floor is not None:
             low = np.zeros(valid.shape, dtype=bool)
             low[valid] = keep & (height < FLOOR_BAND)
+        z_image = np.where(z_image <= MAX_RANGE_M, z_image, 0)  # NaN compares False: 0 too
         keep = background.foreground(z_image, candidate, stamp_ns, params, low=low)[valid]
     x, y, z = x[keep], y[keep], z[keep]
     if params.voxel_size <= 0 or len(z) == 0:
