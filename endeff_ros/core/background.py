@@ -326,13 +326,19 @@ class BackgroundModel:
         self._static_z[gone] = 0
         static = (self._static_z > 0) & margin_ok & (t - self._static_since >= STATIC_S)
         out = (fg & ~(static & ~changed)) | (edge & changed)
-        if low is not None:  # feet: the pixels just above the floor next to kept ones ...
-            box = np.ones((5, 5), np.uint8)
+        if low is not None:
+            # Feet: the parts of the band just above the floor (split at depth edges) that
+            # touch a kept pixel at their depth (not the wall's foot beside a person's legs).
+            box = np.ones((3, 3), np.uint8)
             hi = cv2.dilate(np.where(out, d, 0).astype(np.float32), box)
             lo = cv2.erode(np.where(out, d, np.inf).astype(np.float32), box)
             step = np.float32(EDGE_STEP + EDGE_STEP_Z * 3.0) * stride
-            # ... at their depth (not the wall's foot beside a person's legs)
-            out |= low & candidate & (((d >= lo - step) & (d <= hi + step)) | changed)
+            low_labels, _ = depth_components(d, low & candidate, stride)
+            touch = (low_labels > 0) & (d >= lo - step) & (d <= hi + step)
+            attached = np.zeros(int(low_labels.max()) + 1, bool)
+            attached[low_labels[touch]] = True
+            attached[0] = False
+            out |= attached[low_labels] | (low & candidate & changed)
         self._out = out
         return out
 
