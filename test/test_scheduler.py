@@ -456,3 +456,24 @@ def test_the_worker_wakes_when_a_waiting_depth_image_is_due() -> None:
     assert not worker.is_alive() and got == [None]
     s.flush_colorless(now[0])
     assert [j for j, _ in drain(s)] == ['process'] and s.color_due_in(now[0]) is None
+
+
+def test_a_colour_image_later_than_its_answered_depth_image_makes_no_work() -> None:
+    """A colour image whose depth image was already answered without it gets neither a set
+    nor an early flow (its set can never be processed), only a warning; also when the next
+    depth image pushed its partner out of the synchroniser's queue."""
+    for queue_size in (10, 1):
+        warnings: list[str] = []
+        s = make(color_timeout_s=0.1, queue_size=queue_size,
+                 on_warning=lambda kind, text, seen=warnings: seen.append(kind))
+        feed(s, 'camera_info', 0)
+        _lagged_stream(s, COLOR_LAG_MIN + 1, lambda k: 0.002)
+        t = (COLOR_LAG_MIN + 1) * PERIOD_S
+        feed(s, 'depth', 1000.0 + t * 1e3, receipt=t)
+        drain(s)
+        s.flush_colorless(t + 0.01)  # past the learned wait of 6 ms
+        assert [j for j, _ in drain(s)] == ['process'] and s.stats.colorless == 1
+        feed(s, 'depth', 1000.0 + (t + PERIOD_S) * 1e3, receipt=t + PERIOD_S)
+        assert [j for j, _ in drain(s)] == ['prepare']
+        feed(s, 'color', 1002.0 + t * 1e3, receipt=t + PERIOD_S + 0.001)
+        assert drain(s) == [] and warnings[-1] == 'color_too_late'
