@@ -206,6 +206,7 @@ class BackgroundModel:
         self._bg = np.where(valid, depth, 0).astype(np.float32)
         self._far_ref = np.zeros(shape, np.float32)
         self._far_n = np.zeros(shape, np.int16)
+        self._miss_n = np.zeros(shape, np.int16)
         self._far_t = np.full(shape, -np.inf, np.float64)
         self._near_ref = np.zeros(shape, np.float32)
         self._near_since = np.full(shape, t, np.float64)
@@ -267,17 +268,25 @@ class BackgroundModel:
                 self._labels, _ = depth_components(d, candidate, stride)
                 return candidate.copy()
 
-        # Farther readings: adopted once FAR_FRAMES consecutive frames agree.
-        agree = farther & (self._far_n > 0) & (np.abs(d - self._far_ref) <= margin)
-        self._far_n = np.where(farther, np.where(agree, self._far_n + 1, 1), 0).astype(np.int16)
-        self._far_ref = np.where(farther & ~agree, d, self._far_ref)
+        # Farther readings, and readings where nothing was seen yet (no reading is beyond
+        # the sensor's range: the farthest of all), are adopted once FAR_FRAMES consecutive
+        # frames agree; until then a reading where nothing was seen counts as changed (a
+        # person in front of a hall too deep for the sensor).
+        fresh = valid & ~known
+        pending = farther | fresh
+        agree = pending & (self._far_n > 0) & (np.abs(d - self._far_ref) <= margin)
+        self._far_n = np.where(pending, np.where(agree, self._far_n + 1, 1), 0).astype(np.int16)
+        self._far_ref = np.where(pending & ~agree, d, self._far_ref)
         adopt = self._far_n >= FAR_FRAMES
         # Readings within the margin: the running mean follows them.
         steady = known & ~nearer & ~farther
         bg = np.where(steady, bg + np.float32(FOLLOW) * (d - bg), bg)
-        bg = np.where(adopt | (valid & (bg <= 0)), d, bg).astype(np.float32)
-        self._far_t = np.where(adopt, t, self._far_t)
+        bg = np.where(adopt, d, bg).astype(np.float32)
+        self._far_t = np.where(adopt & known, t, self._far_t)
         self._far_n[adopt] = 0
+        # No reading for FAR_FRAMES frames: what was there left, nothing is seen behind it.
+        self._miss_n = np.where(valid | (bg <= 0), 0, self._miss_n + 1).astype(np.int16)
+        bg[self._miss_n >= FAR_FRAMES] = 0
         # Nearer readings: absorbed after background_absorb_s at a steady depth.
         same = nearer & (np.abs(d - self._near_ref) <= margin)
         self._near_since = np.where(same, self._near_since, t)
@@ -291,7 +300,8 @@ class BackgroundModel:
         self._labels = labels
         if t < self._learn_until:
             return candidate.copy()
-        changed = cv2.morphologyEx((nearer & ~absorb).view(np.uint8), cv2.MORPH_OPEN,
+        changed = cv2.morphologyEx(((nearer & ~absorb) | (fresh & ~adopt)).view(np.uint8),
+                                   cv2.MORPH_OPEN,
                                    np.ones((3, 3), np.uint8)).view(bool)
         n = int(labels.max()) + 1
         total = np.bincount(labels.ravel(), minlength=n)
