@@ -122,6 +122,25 @@ def test_person_present_from_frame_0_is_found_during_and_after_learning():
     assert all(f[2] == 0 and f[3] == 0 and f[4] == 1 for f in learnt[3:])
 
 
+def test_person_in_front_of_no_reading_is_found():
+    """Nothing within the sensor's range behind the person (a deep hall): no reading is the
+    farthest background, so the moving person has changed pixels and a static chair has
+    none."""
+    model = BackgroundModel()
+    found = []
+    for k in range(30):
+        depth = np.full((K.height, K.width), np.inf, np.float32)
+        add_chair(depth)
+        x = -0.5 + 0.15 * np.sin(k / 9.0)
+        add_person(depth, x, 0.5 + 0.5 * np.sin(k / 5.0))
+        depth[np.isinf(depth)] = np.nan
+        est = estimate_frame(frame(k, depth), PARAMS, background=model)
+        found.append((points_near(est.points, x, PERSON_Z),
+                      points_near(est.points, CHAIR_X, CHAIR_Z)))
+    assert all(p > 300 for p, _ in found)
+    assert all(c == 0 for _, c in found[20:])
+
+
 def test_robot_pedestal_stays_with_its_moving_arm():
     """The whole connected part moves: a static pedestal joined to a moving arm is kept."""
     model = BackgroundModel()
