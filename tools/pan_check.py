@@ -1,0 +1,123 @@
+"""After a camera pan: are the tracks' ids kept, and is the scene clean again within 2 s?
+
+For every bag of the rooms suite whose camera pans (``*-pan``; the pan's stamps are in the
+bag's ``endeff.details``), the tracker runs over the bag with the given parameters; tracks are
+matched to the ground truth per frame (Hungarian, 0.15 m). Reported per bag: how many
+end-effectors matched just before the pan are matched to the same track id when next matched
+after it, and the false positives per frame before the pan (after its first 10 frames), at
+most during the pan and the 2 s after it, and from 2 s after the pan's end on.
+
+    python -m tools.pan_check data/rooms/mcap [--params YAML] [--jobs 2] [--json OUT]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from scipy.optimize import linear_sum_assignment
+
+from endeff_ros.bag.reader import BagReader
+from endeff_ros.cli_common import load_params_option, print_json
+from endeff_ros.core.errors import InputError
+from endeff_ros.core.params import EndeffParams
+from endeff_ros.core.tracker import Tracker
+
+CLEAN_AFTER_NS = 2_000_000_000
+MATCH_M = 0.15
+
+
+def _pan_stamps(bag: Path) -> tuple[int, int]:
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    pan = json.loads(info['custom_data']['endeff.details'])['pan']
+    return int(pan['start_stamp_ns']), int(pan['end_stamp_ns'])
+
+
+def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
+    """The figures above for one pan bag."""
+    start, end = _pan_stamps(bag)
+    tracker = Tracker(params)
+    rows: list[tuple[int, int, dict[int, int]]] = []  # stamp, false positives, gt -> track id
+    with BagReader(bag) as reader:
+        for frame, gt in reader.frames():
+            try:
+                tracks = tracker.update(frame).tracks
+            except InputError:
+                tracks = []
+            if gt is None:
+                continue
+            est = np.array([t.position for t in tracks]).reshape(-1, 3)
+            ids: dict[int, int] = {}
+            fp = len(est)
+            if len(est) and len(gt):
+                dist = np.linalg.norm(est[:, None] - gt[None, :, :3], axis=2)
+                ri, ci = linear_sum_assignment(dist)
+                ok = dist[ri, ci] < MATCH_M
+                fp -= int(ok.sum())
+                ids = {int(c): tracks[int(r)].id for r, c in zip(ri[ok], ci[ok])}
+            rows.append((frame.stamp_ns, fp, ids))
+    before = [r for r in rows if r[0] < start]
+    during = [r for r in rows if start <= r[0] < end + CLEAN_AFTER_NS]
+    after = [r for r in rows if r[0] >= end + CLEAN_AFTER_NS]
+    last: dict[int, int] = {}
+    for r in before:
+        last.update(r[2])
+    first: dict[int, int] = {}
+    for r in during + after:
+        for k, v in r[2].items():
+            first.setdefault(k, v)
+    both = [k for k in last if k in first]
+    return {'bag': bag.name, 'ids_kept': sum(first[k] == last[k] for k in both),
+            'ids_compared': len(both),
+            'fp_per_frame_before': float(np.mean([r[1] for r in before[10:]]))
+            if len(before) > 10 else None,
+            'fp_max_during': max((r[1] for r in during), default=0),
+            'fp_per_frame_after_2s': float(np.mean([r[1] for r in after])) if after else None}
+
+
+def _job(args: tuple[Path, EndeffParams | None]) -> dict[str, Any]:
+    return check_bag(*args)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('folder', help='folder holding the rooms suite bags')
+    parser.add_argument('--params', help='parameter YAML (default: the defaults)')
+    parser.add_argument('--jobs', type=int, default=1)
+    parser.add_argument('--json', help='also write the report here')
+    args = parser.parse_args(argv)
+    params = load_params_option(args.params, 'pan_check')
+    bags = sorted(p for p in Path(args.folder).glob('*-pan') if (p / 'metadata.yaml').is_file())
+    if not bags:
+        parser.error(f'no pan bags (*-pan) in {args.folder}')
+    jobs = [(b, params) for b in bags]
+    if args.jobs > 1:
+        import multiprocessing
+
+        with multiprocessing.get_context('spawn').Pool(args.jobs) as pool:
+            per_bag = pool.map(_job, jobs)
+    else:
+        per_bag = [_job(j) for j in jobs]
+
+    def mean(key: str, rows: list[dict[str, Any]]) -> float | None:
+        vals = [r[key] for r in rows if r[key] is not None]
+        return round(float(np.mean(vals)), 3) if vals else None
+
+    report: dict[str, Any] = {'bags': per_bag}
+    for room in ('empty', 'furnished'):
+        rows = [r for r in per_bag if f'-{room}-' in r['bag']]
+        report[room] = {'bags': len(rows),
+                        'ids_kept': sum(r['ids_kept'] for r in rows),
+                        'ids_compared': sum(r['ids_compared'] for r in rows),
+                        'fp_per_frame_before': mean('fp_per_frame_before', rows),
+                        'fp_per_frame_after_2s': mean('fp_per_frame_after_2s', rows)}
+    print_json(report, args.json)
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
