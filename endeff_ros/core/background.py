@@ -82,6 +82,8 @@ if TYPE_CHECKING:
 
 #: Consecutive frames that must agree on a farther depth before the background takes it.
 FAR_FRAMES = 3
+#: Frames without a reading after which a pixel forgets its background (it is beyond range).
+MISS_FRAMES = 15
 #: Weight of a reading within the margin in the background's running mean.
 FOLLOW = 0.05
 #: Depth-noise term of the margin: ``background_margin + NOISE_Z2 * z**2`` metres.
@@ -284,9 +286,10 @@ class BackgroundModel:
         bg = np.where(adopt, d, bg).astype(np.float32)
         self._far_t = np.where(adopt & known, t, self._far_t)
         self._far_n[adopt] = 0
-        # No reading for FAR_FRAMES frames: what was there left, nothing is seen behind it.
+        # No reading for MISS_FRAMES frames: what was there left, nothing is seen behind it
+        # (not after a few frames: dark or glossy surfaces drop out now and then).
         self._miss_n = np.where(valid | (bg <= 0), 0, self._miss_n + 1).astype(np.int16)
-        bg[self._miss_n >= FAR_FRAMES] = 0
+        bg[self._miss_n >= MISS_FRAMES] = 0
         # Nearer readings: absorbed after background_absorb_s at a steady depth.
         same = nearer & (np.abs(d - self._near_ref) <= margin)
         self._near_since = np.where(same, self._near_since, t)
