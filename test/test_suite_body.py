@@ -20,7 +20,15 @@ from endeff_ros.synth.skeleton_body import (
     standing_height,
 )
 from endeff_ros.synth.suite import BagRenderer, BagSpec, PersonSpec
-from endeff_ros.synth.views import FARTHEST_M, NEAREST_M, View, aim_camera, effective_kind, facing, place
+from endeff_ros.synth.views import (
+    FARTHEST_M,
+    NEAREST_M,
+    View,
+    aim_camera,
+    effective_kind,
+    facing,
+    place,
+)
 
 
 def _inside(prim, pts: np.ndarray) -> np.ndarray:
