@@ -119,15 +119,29 @@ PROTECT_RADIUS_PX = 2
 
 
 def depth_components(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_],
-                     stride: int) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]]:
+                     stride: int, far_side: npt.NDArray[np.bool_] | None = None,
+                     ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.bool_]]:
     """Connected parts of ``mask`` split at depth edges.
 
     ``depth`` (H, W) metres with 0 or NaN where there is no reading, ``mask`` (H, W) the
     pixels to label, ``stride`` the pixel stride of the image (neighbours are that many
     full-resolution pixels apart). A pixel whose 4-neighbour is nearer by more than the edge
     step is the far side of an edge and is left out; 4-connectivity then cannot cross the
-    edge. Returns the labels (0: none) and the left-out far-side pixels of ``mask``.
+    edge. ``far_side``: :func:`far_side_pixels` of the same image, when the caller labels
+    several masks of it. Returns the labels (0: none) and the left-out far-side pixels of
+    ``mask``.
     """
+    if far_side is None:
+        far_side = far_side_pixels(depth, stride)
+    far = far_side & mask
+    _, labels = cv2.connectedComponents((mask & ~far).view(np.uint8), connectivity=4,
+                                        ltype=cv2.CV_32S)
+    return labels, far
+
+
+def far_side_pixels(depth: npt.NDArray[np.float32], stride: int) -> npt.NDArray[np.bool_]:
+    """(H, W) pixels of ``depth`` with a 4-neighbour nearer by more than the edge step
+    (``(EDGE_STEP + EDGE_STEP_Z * z) * stride`` metres): the far sides of depth edges."""
     z = np.where(np.isfinite(depth) & (depth > 0), depth, np.inf).astype(np.float32)
     step = np.float32((EDGE_STEP + EDGE_STEP_Z * np.minimum(z, 20.0)) * stride)
     lower = z - step  # a neighbour below this is nearer by more than the step
@@ -136,10 +150,7 @@ def depth_components(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_]
     far[:, 1:] |= z[:, :-1] < lower[:, 1:]
     far[:-1, :] |= z[1:, :] < lower[:-1, :]
     far[1:, :] |= z[:-1, :] < lower[1:, :]
-    far &= mask
-    _, labels = cv2.connectedComponents((mask & ~far).view(np.uint8), connectivity=4,
-                                        ltype=cv2.CV_32S)
-    return labels, far
+    return far
 
 
 def _windows(image: npt.NDArray, uv: npt.NDArray[np.int64]) -> npt.NDArray:
@@ -299,7 +310,8 @@ class BackgroundModel:
         self._bg = bg
 
         upper = candidate if low is None else candidate & ~low
-        labels, edge = depth_components(d, upper, stride)
+        far_side = far_side_pixels(d, stride)
+        labels, edge = depth_components(d, upper, stride, far_side)
         self._labels = labels
         if t < self._learn_until:
             return candidate.copy()
@@ -346,7 +358,7 @@ class BackgroundModel:
             hi = cv2.dilate(np.where(out, d, 0).astype(np.float32), box)
             lo = cv2.erode(np.where(out, d, np.inf).astype(np.float32), box)
             step = np.float32(EDGE_STEP + EDGE_STEP_Z * 3.0) * stride
-            low_labels, _ = depth_components(d, low & candidate, stride)
+            low_labels, _ = depth_components(d, low & candidate, stride, far_side)
             touch = (low_labels > 0) & (d >= lo - step) & (d <= hi + step)
             attached = np.zeros(int(low_labels.max()) + 1, bool)
             attached[low_labels[touch]] = True
