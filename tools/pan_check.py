@@ -2,10 +2,11 @@
 
 For every bag of the rooms suite whose camera pans (``*-pan``; the pan's stamps are in the
 bag's ``endeff.details``), the tracker runs over the bag with the given parameters; tracks are
-matched to the ground truth per frame (Hungarian, 0.15 m). Reported per bag: how many
-end-effectors matched just before the pan are matched to the same track id when next matched
-after it, and the false positives per frame before the pan (after its first 10 frames), at
-most during the pan and the 2 s after it, and from 2 s after the pan's end on.
+matched to the ground truth per frame as ``endeff eval`` does (``scoring.score_frame``).
+Reported per bag: how many end-effectors matched just before the pan are matched to the same
+track id when next matched after it, and the false positives per frame before the pan
+(after its first 10 frames), at most during the pan and the 2 s after it, and from 2 s after
+the pan's end on.
 
     python -m tools.pan_check data/rooms/mcap [--params YAML] [--jobs 2] [--json OUT]
 """
@@ -18,31 +19,31 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
-from scipy.optimize import linear_sum_assignment
 
+from endeff_ros.attributes import custom_data
 from endeff_ros.bag.reader import BagReader
 from endeff_ros.cli_common import load_params_option, print_json
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.tracker import Tracker
+from endeff_ros.scoring import score_frame
+from endeff_ros.synth.suite import DETAILS_KEY
 
 CLEAN_AFTER_NS = 2_000_000_000
-MATCH_M = 0.15
 
 
-def _pan_stamps(bag: Path) -> tuple[int, int]:
-    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
-    pan = json.loads(info['custom_data']['endeff.details'])['pan']
+def _pan_stamps(reader: BagReader) -> tuple[int, int]:
+    """Stamps (ns) of the frames at which the bag's camera turn starts and ends."""
+    pan = json.loads(custom_data(reader.reader)[DETAILS_KEY])['pan']
     return int(pan['start_stamp_ns']), int(pan['end_stamp_ns'])
 
 
 def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
     """The figures above for one pan bag."""
-    start, end = _pan_stamps(bag)
     tracker = Tracker(params)
     rows: list[tuple[int, int, dict[int, int]]] = []  # stamp, false positives, gt -> track id
     with BagReader(bag) as reader:
+        start, end = _pan_stamps(reader)
         for frame, gt in reader.frames():
             try:
                 tracks = tracker.update(frame).tracks
@@ -50,15 +51,10 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
                 tracks = []
             if gt is None:
                 continue
-            est = np.array([t.position for t in tracks]).reshape(-1, 3)
-            ids: dict[int, int] = {}
-            fp = len(est)
-            if len(est) and len(gt):
-                dist = np.linalg.norm(est[:, None] - gt[None, :, :3], axis=2)
-                ri, ci = linear_sum_assignment(dist)
-                ok = dist[ri, ci] < MATCH_M
-                fp -= int(ok.sum())
-                ids = {int(c): tracks[int(r)].id for r, c in zip(ri[ok], ci[ok])}
+            score = score_frame(np.array([t.position for t in tracks]).reshape(-1, 3),
+                                gt[:, :3])
+            ids = {int(g): tracks[int(e)].id for e, g in score.matches}
+            fp = score.fp
             rows.append((frame.stamp_ns, fp, ids))
     before = [r for r in rows if r[0] < start]
     during = [r for r in rows if start <= r[0] < end + CLEAN_AFTER_NS]
