@@ -1,8 +1,10 @@
 """Section 4 of the core: bands (Eqs. 1-4), topology graph (Eqs. 5-7) and the single-frame
 estimator on synthetic depth frames with known end-effectors.
 
-Scenes come from :mod:`shapes` (capsule bodies z-buffered into a 640x480 depth image); every
-random draw is seeded, so each case is deterministic. Tips are matched to candidates one to
+Scenes come from :mod:`endeff_ros.synth.scenes`: the benchmark suites' own bodies ray-cast
+into an ideal 640x480 depth image (the same renderer as the bags), with the suites' ground
+truth, the CENTRE of each terminal part (head, palm, shoe, a star limb's end cap, a chair leg's
+foot, the gripper; see docs/benchmark-bags.md). Ground truth is matched to candidates one to
 one (Hungarian matching on the Euclidean distance).
 """
 
@@ -13,7 +15,6 @@ import math
 
 import numpy as np
 import pytest
-import shapes
 from scipy import sparse
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse import csgraph
@@ -36,9 +37,33 @@ from endeff_ros.core.graph import (
 )
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.single_frame import estimate_frame, estimate_points
-from endeff_ros.core.types import RGBDFrame
+from endeff_ros.core.types import KINECT_640, RGBDFrame
+from endeff_ros.synth import scenes
+from endeff_ros.synth.body import (
+    HEAD,
+    LEFT_FOOT,
+    LEFT_HAND,
+    RIGHT_FOOT,
+    RIGHT_HAND,
+    PersonModel,
+    PersonStyle,
+)
+from endeff_ros.synth.render import Camera
 
-TIP_TOLERANCE = 0.05  # m, Hungarian-matched tip to candidate
+#: m, ground truth to its matched candidate. The terminal parts of the person, the star and
+#: the chair legs reach at most 0.12 m (a shoe's half length) from their centre, and the found
+#: end lies on the part, pushed behind its visible surface by the part radius (Section 4): the
+#: measured errors are 0.7-4.1 cm.
+TIP_TOLERANCE = 0.05
+#: m, the robot arm's ground truth: its terminal parts end far from their centres (the fingers
+#: reach 0.12 m beyond the gripper's centre, the pedestal's bottom corners 0.17 m from its
+#: bottom centre), so the found ends lie 8.5-14.4 cm from the ground truth (the suite's
+#: robot_arm error is 8.5 cm, docs/results.md). This is the benchmark's true-positive
+#: threshold (docs/benchmark-bags.md); that the end lies ON the part is checked separately.
+ARM_TOLERANCE = 0.15
+#: m, a found end to the solid of its ground truth's terminal part (0 inside): the part-radius
+#: step puts it inside; 2 cm allows for the sub-band centroid on a thin part's surface.
+ON_PART = 0.02
 
 
 def match(tips, candidates):
@@ -67,200 +92,224 @@ def set_distance(a, b):
     return float(match(a, b)[2].max()) if len(a) else 0.0
 
 
-def segment_distance(p, a, b):
-    """Distance from point ``p`` to segment ``ab``."""
-    p, a, b = (np.asarray(v, float) for v in (p, a, b))
-    ab = b - a
-    t = np.clip((p - a) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
-    return float(np.linalg.norm(p - (a + t * ab)))
-
-
 def frame(depth):
-    return RGBDFrame(stamp_ns=0, frame_id='camera', depth=depth, intrinsics=shapes.K640)
-
-
-rotate_about_camera = shapes.rotate_about_camera
+    return RGBDFrame(stamp_ns=0, frame_id='camera', depth=depth, intrinsics=KINECT_640)
 
 
 # ---------------------------------------------------------------------------------------------
-# Synthetic scenes with known tips
+# Synthetic scenes with known end-effectors
 # ---------------------------------------------------------------------------------------------
 
-CAMERA_HEIGHT = {'chair': 0.4}  # chair: low camera, so the seat hides no leg (see shapes.chair)
-#: The robot arm stands far enough for its pedestal's foot to stay clear of the image's bottom
-#: border (closer, the foot would be where the border cuts the pedestal: no end).
-ARM_Z = 2.6
+#: The chair is seen from 0.4 m up, below its seat (0.46 m), so the seat hides no leg.
+LOW = Camera(KINECT_640, height=0.4, pitch=0.0, frame_id='camera')
+#: Robot arm joint angles (base yaw, shoulder, elbow, wrist; rad) of the two arm scenes.
+ARM_Q = {0: (0.6, 0.7, 1.2, 0.3), 1: (-0.5, 0.3, 0.8, -0.3)}
+#: The parts a root may lie in: the entity's massive part (the star's hub, the person's trunk,
+#: the chair's seat, the arm's pedestal and links but not its gripper).
+MASSIVE = {'star': {'hub'}, 'person': {'pelvis', 'abdomen', 'chest'}, 'chair': {'seat'},
+           'arm': {'pedestal', 'turret', 'link1', 'link2'}}
+#: The chair's backrest corners (ground-truth ids 4, 5): see test_chair_backrest_corners.
+CHAIR_LEGS = [0, 1, 2, 3]
 
 
-def _optical(p, camera_height):
-    return shapes.to_optical(p, camera_height)[0]
+def _entity(kind, arg, variant):
+    if kind == 'star':  # variant: the first limb's angle (rad)
+        return scenes.star(arg, spin=variant)
+    if kind == 'person':  # variant: yaw (rad)
+        return scenes.person(arg, yaw=variant)
+    if kind == 'chair':  # arg: yaw, variant: x (m)
+        return scenes.placed_chair(arg, x=variant)
+    return scenes.placed_robot_arm(ARM_Q[variant])
 
 
-def _star_root_ok(root):
-    centre = _optical([0.0, 1.2, 2.5], 1.1)
-    # Within the central ball (radius 0.14) + 5 cm.
-    return np.linalg.norm(root - centre), 0.14 + 0.05
-
-
-def _person_root_ok(root, camera_height=1.1, x=0.0, z=2.8):
-    # Massive part: torso (axis y 0.95..1.40, radius 0.15) and pelvis (y 0.98, radius 0.13).
-    a = _optical([x, 0.95, z], camera_height)
-    b = _optical([x, 1.40, z], camera_height)
-    # Within the torso capsule + 5 cm, and within 0.3 m of the torso axis centre.
-    centre_ok = np.linalg.norm(root - (a + b) / 2) <= 0.3
-    return segment_distance(root, a, b) if centre_ok else np.inf, 0.15 + 0.05
-
-
-def _chair_root_ok(root, yaw, z=2.4, camera_height=0.4):
-    # Back to the chair's own frame (x right, y up, z back; the seat is at y = 0.5 m).
-    world = np.array([root[0], camera_height - root[1], root[2] - z])
-    c, s = math.cos(yaw), math.sin(yaw)
-    px, pz = c * world[0] - s * world[2], s * world[0] + c * world[2]
-    # Seat region: the 0.4 x 0.4 m frame (capsules of radius 3.5 cm) + 5 cm, and within 15 cm
-    # of the seat's height (0.5 m).
-    outside = max(abs(px) - 0.25, abs(pz) - 0.25, abs(world[1] - 0.5) - 0.15, 0.0)
-    return outside, 1e-9
-
-
-def _arm_root_ok(root, camera_height=1.1, z=ARM_Z):
-    base = np.array([-0.3, 0.0, z])
-    joints = [base + [0, 0.03, 0], base + [0, 0.6, 0], base + [0.35, 0.95, 0],
-              base + [0.75, 0.85, 0], base + [0.95, 0.55, 0]]
-    joints = [_optical(j, camera_height) for j in joints]
-    # On the chain: within the thickest link radius (8 cm) + 5 cm of its axis.
-    d = min(segment_distance(root, a, b) for a, b in zip(joints[:-1], joints[1:]))
-    return d, 0.08 + 0.05
-
-
-def _make(kind, arg, seed):
-    if kind == 'star':
-        return shapes.star(arg, seed=seed)
-    if kind == 'person':
-        return shapes.person(arg, seed=seed)
-    if kind == 'chair':
-        return shapes.chair(yaw=arg, seed=seed)
-    return shapes.robot_arm(z=ARM_Z, seed=seed)
+def _shoot(kind, entity, camera=None):
+    camera = camera or (LOW if kind == 'chair' else scenes.LEVEL)
+    return scenes.shoot(entity, camera, floor=kind != 'star')  # the star floats in the air
 
 
 @functools.cache
-def rendered(kind, arg, seed):
-    """(depth, tips) of a scene, rendered once per test session."""
-    return shapes.render(_make(kind, arg, seed), camera_height=CAMERA_HEIGHT.get(kind, 1.1))
+def rendered(kind, arg, variant):
+    """The scene's ``scenes.Shot``, rendered once per test session."""
+    return _shoot(kind, _entity(kind, arg, variant))
 
 
 @functools.cache
-def estimated(kind, arg, seed):
-    depth, tips = rendered(kind, arg, seed)
-    return estimate_frame(frame(depth), EndeffParams()), tips
+def estimated(kind, arg, variant):
+    shot = rendered(kind, arg, variant)
+    return estimate_frame(shot.frame, EndeffParams()), shot
+
+
+def scored(kind):
+    """The ground-truth ids a scene test scores (the chair's backrest corners are no ends:
+    test_chair_backrest_corners) and their tolerance."""
+    return (CHAIR_LEGS if kind == 'chair' else slice(None),
+            ARM_TOLERANCE if kind == 'arm' else TIP_TOLERANCE)
 
 
 CASES = [
-    *(pytest.param('star', n, seed, id=f'star{n}-seed{seed}') for n in (3, 4, 5, 6)
-      for seed in (0, 1)),
-    *(pytest.param('person', pose, seed, id=f'{pose}-seed{seed}')
-      for pose in ('t_pose', 'arms_down') for seed in (0, 1)),
-    # The chair as shapes.chair() draws it (yaw 0.5) and turned the other way.
-    *(pytest.param('chair', yaw, seed, id=f'chair-yaw{yaw}-seed{seed}') for yaw in (0.5, -0.5)
-      for seed in (0, 1)),
-    *(pytest.param('arm', None, seed, id=f'robot_arm-seed{seed}') for seed in (0, 1)),
+    *(pytest.param('star', n, spin, id=f'star{n}-spin{spin}') for n in (3, 4, 5, 6)
+      for spin in (0.3, 1.0)),
+    *(pytest.param('person', pose, yaw, id=f'{pose}-yaw{yaw}')
+      for pose in ('t_pose', 'arms_down') for yaw in (0.0, 0.35)),
+    *(pytest.param('chair', yaw, x, id=f'chair-yaw{yaw}-x{x}') for yaw in (0.5, -0.5)
+      for x in (0.0, 0.2)),
+    *(pytest.param('arm', None, q, id=f'robot_arm-q{q}') for q in ARM_Q),
 ]
 
 
 def test_scenes_are_visible():
-    """Premise of the scene tests: every tip projects inside the image, in front of the camera."""
+    """Premise of the scene tests: every end-effector projects inside the image, in front of
+    the camera, and its own part is what the camera sees there (the chair's back legs too:
+    the low camera looks under the seat)."""
     for case in CASES:
-        _, tips = rendered(*case.values)
-        uv = shapes.K640.project(tips)
-        assert np.all(tips[:, 2] > 0.5), case.id
-        assert np.all((uv >= 5) & (uv < [shapes.K640.width - 5, shapes.K640.height - 5])), case.id
+        shot = rendered(*case.values)
+        uv = KINECT_640.project(shot.gt)
+        assert np.all(shot.gt[:, 2] > 0.5), case.id
+        assert np.all((uv >= 5) & (uv < [KINECT_640.width - 5, KINECT_640.height - 5])), case.id
+        assert shot.gt_visible.all(), case.id
 
 
-@pytest.mark.parametrize('kind, arg, seed', CASES)
-def test_every_tip_found_within_5cm(kind, arg, seed):
-    est, tips = estimated(kind, arg, seed)
-    errors = tip_errors(tips, est.positions())
-    assert np.all(errors < TIP_TOLERANCE), f'tip errors {np.round(errors, 3)}'
+def _ends_on_their_parts(shot, positions, ids, tolerance):
+    """(errors, distances to the terminal part) of ground truth ``ids`` and their matched
+    candidates; inf where a ground truth has no candidate."""
+    gt = shot.gt[ids]
+    errors = tip_errors(gt, positions)
+    rows, cols, _ = match(gt, positions)
+    on_part = np.full(len(gt), np.inf)
+    index = np.arange(len(shot.gt))[ids]
+    for r, c in zip(rows, cols):
+        on_part[r] = scenes.distance_to_part(shot.part(index[r]), positions[c][None])[0]
+    return errors, on_part
 
 
-@pytest.mark.parametrize('kind, arg, seed', CASES)
-def test_nothing_else_is_reported(kind, arg, seed):
-    """One entity and no extra candidate: at most one per tip (a missed tip is the business
-    of test_every_tip_found_within_5cm)."""
-    est, tips = estimated(kind, arg, seed)
+@pytest.mark.parametrize('kind, arg, variant', CASES)
+def test_every_end_effector_found_on_its_part(kind, arg, variant):
+    """Each end-effector has a candidate within the tolerance of its ground truth, and that
+    candidate lies on the end-effector's own terminal part (not on the limb before it). The
+    robot arm's fingers are no part of the gripper box: the candidate at the finger tips is
+    up to 4 cm outside it (measured 2.4-3.7 cm), hence ARM_TOLERANCE there too."""
+    est, shot = estimated(kind, arg, variant)
+    ids, tolerance = scored(kind)
+    errors, on_part = _ends_on_their_parts(shot, est.positions(), ids, tolerance)
+    assert np.all(errors < tolerance), f'errors {np.round(errors, 3)}'
+    limit = 0.04 if kind == 'arm' else ON_PART
+    assert np.all(on_part <= limit), f'distance to the part {np.round(on_part, 3)}'
+
+
+@pytest.mark.parametrize('kind, arg, variant', [
+    pytest.param('star', 5, 0.3, id='star'), pytest.param('person', 't_pose', 0.0, id='person'),
+    pytest.param('chair', 0.5, 0.0, id='chair')])
+def test_end_effector_check_fails_on_a_wrong_scene(kind, arg, variant):
+    """The check above can fail: a limb missing from the rendered scene (its end-effector has
+    no candidate), or the scene moved 0.1 m sideways from its ground truth."""
+    est, shot = estimated(kind, arg, variant)
+    ids, tolerance = scored(kind)
+    entity = _entity(kind, arg, variant)
+    limb = {'star': ('limb0_a', 'limb0_b', 'limb0_cap'), 'person': ('head', 'neck'),
+            'chair': ('leg0',)}[kind]  # the parts of ground truth 0 and those holding it
+    entity.prims = [p for p in entity.prims if p.part not in limb]
+    missing = estimate_frame(_shoot(kind, entity).frame, EndeffParams()).positions()
+    errors, _ = _ends_on_their_parts(shot, missing, ids, tolerance)
+    assert errors[0] > tolerance, np.round(errors, 3)
+    moved = est.positions() + [0.1, 0.0, 0.0]
+    errors, on_part = _ends_on_their_parts(shot, moved, ids, tolerance)
+    assert np.any(errors > tolerance) and np.any(on_part > ON_PART)
+
+
+@pytest.mark.parametrize('kind, arg, variant', [
+    *(case for case in CASES if case.values[0] != 'arm'),
+    *(pytest.param(*case.values, id=case.id, marks=pytest.mark.xfail(strict=True, reason=(
+        'the box pedestal is a 0.24 m square whose bottom corners are two ends (0.24 m '
+        'apart): one end too many'))) for case in CASES if case.values[0] == 'arm')])
+def test_nothing_else_is_reported(kind, arg, variant):
+    """One entity and no extra candidate: at most one per end-effector (a missed one is the
+    business of test_every_end_effector_found_on_its_part; the chair's backrest gives at
+    most one end for its two corners)."""
+    est, shot = estimated(kind, arg, variant)
     assert len(est.entities) == 1
-    assert len(est.positions()) <= len(tips), np.round(est.positions(), 3)
+    assert len(est.positions()) <= len(shot.gt), np.round(est.positions(), 3)
 
 
-@pytest.mark.parametrize('kind, arg, seed', CASES)
-def test_root_lies_in_the_massive_part(kind, arg, seed):
-    est, _ = estimated(kind, arg, seed)
+@pytest.mark.xfail(strict=True, reason=(
+    'the backrest is a solid panel: its two top corners are no separate ends (no end at all '
+    'from the low camera, one at the top centre 0.2-0.25 m from each corner from higher up; '
+    'docs/results.md)'))
+@pytest.mark.parametrize('yaw', [0.5, -0.5])
+def test_chair_backrest_corners(yaw):
+    est, shot = estimated('chair', yaw, 0.0)
+    errors = tip_errors(shot.gt[4:], est.positions())
+    assert np.all(errors < TIP_TOLERANCE), np.round(errors, 3)
+
+
+@pytest.mark.parametrize('kind, arg, variant', CASES)
+def test_root_lies_in_the_massive_part(kind, arg, variant):
+    """The root (the foreground point nearest the entity's centre, Section 4) is on the
+    entity's massive part: within ON_PART of one of its solids."""
+    est, shot = estimated(kind, arg, variant)
     assert len(est.entities) >= 1
     root = est.entities[0].root
-    if kind == 'chair':
-        distance, limit = _chair_root_ok(root, yaw=arg)
-    else:
-        check = {'star': _star_root_ok, 'person': _person_root_ok, 'arm': _arm_root_ok}[kind]
-        distance, limit = check(root)
-    assert distance <= limit, f'root {np.round(root, 3)}: {distance:.3f} > {limit:.3f}'
+    distance = min(scenes.distance_to_part(p, root[None])[0] for p in shot.prims
+                   if p.part in MASSIVE[kind])
+    assert distance <= ON_PART, f'root {np.round(root, 3)}: {distance:.3f} m off'
     # The root is a foreground point of its entity.
     assert np.min(np.linalg.norm(est.points - root, axis=1)) < 1e-9
 
 
 @pytest.mark.parametrize('pose', ['t_pose', 'arms_down'])
-@pytest.mark.parametrize('seed', [0, 1])
-def test_person_hands_and_feet(pose, seed):
+@pytest.mark.parametrize('yaw', [0.0, 0.35])
+def test_person_hands_and_feet(pose, yaw):
     """Hands and both feet within 5 cm; the feet, standing on the floor, stay two separate
     ends after floor removal (one candidate each)."""
-    est, tips = estimated('person', pose, seed)
+    est, shot = estimated('person', pose, yaw)
     assert est.floor is not None
     assert est.floor.normal @ [0.0, -1.0, 0.0] > math.cos(math.radians(1.0))
-    assert est.floor.offset == pytest.approx(1.1, abs=0.01)
-    rows, cols, dist = match(tips, est.positions())
+    assert est.floor.offset == pytest.approx(scenes.LEVEL.height, abs=0.01)
+    rows, cols, dist = match(shot.gt, est.positions())
     by_tip = dict(zip(rows.tolist(), zip(cols.tolist(), dist.tolist())))
-    hands_feet = [1, 2, 3, 4]  # tips: head, hands (x<0, x>0), feet (x<0, x>0)
-    for t in hands_feet:
+    for t in (LEFT_HAND, RIGHT_HAND, LEFT_FOOT, RIGHT_FOOT):
         assert t in by_tip and by_tip[t][1] < TIP_TOLERANCE, (t, by_tip.get(t))
-    left_foot, right_foot = by_tip[3][0], by_tip[4][0]
+    left_foot, right_foot = by_tip[LEFT_FOOT][0], by_tip[RIGHT_FOOT][0]
     assert left_foot != right_foot
-    # The feet are 0.3 m apart; each candidate is on its own side.
+    # The ankles are 0.24 m apart; each candidate is on its own side (the person's left is
+    # the camera's right).
     positions = est.positions()
-    assert positions[left_foot][0] < -0.08 and positions[right_foot][0] > 0.08
+    assert positions[left_foot][0] > 0.06 and positions[right_foot][0] < -0.06
 
 
 # ---------------------------------------------------------------------------------------------
 # Camera motion on the depth path (approximate: pixels and voxels do not move with the scene)
 # ---------------------------------------------------------------------------------------------
 
+#: (pitch down, yaw to the left, roll clockwise) of the turned camera, rad.
 TURNS = {'pitch-down': (math.radians(10), 0.0, 0.0), 'pitch-up': (math.radians(-10), 0.0, 0.0),
          'yaw': (0.0, math.radians(10), 0.0), 'roll': (0.0, 0.0, math.radians(10))}
 
 
-@pytest.mark.parametrize('rotvec, n', [
-    pytest.param(rotvec, n, id=f'star{n}-{name}')
-    for n in (4, 5) for name, rotvec in TURNS.items()])
-def test_star_seen_by_a_turned_camera(rotvec, n):
-    rotation = Rotation.from_rotvec(rotvec).as_matrix()
-    depth, tips = shapes.render(rotate_about_camera(shapes.star(n, seed=2), rotation, 1.1))
-    est = estimate_frame(frame(depth), EndeffParams())
+def turned(height, pitch, yaw, roll):
+    return Camera(KINECT_640, height=height, pitch=pitch, yaw=yaw, roll=roll, frame_id='camera')
+
+
+@pytest.mark.parametrize('turn, n', [
+    pytest.param(turn, n, id=f'star{n}-{name}')
+    for n in (4, 5) for name, turn in TURNS.items()])
+def test_star_seen_by_a_turned_camera(turn, n):
+    shot = _shoot('star', scenes.star(n, spin=1.0), turned(scenes.LEVEL.height, *turn))
+    est = estimate_frame(shot.frame, EndeffParams())
     assert est.floor is None
     assert len(est.positions()) == n
-    errors = tip_errors(tips, est.positions())
+    errors = tip_errors(shot.gt, est.positions())
     assert np.all(errors < TIP_TOLERANCE), np.round(errors, 3)
 
 
-@pytest.mark.parametrize('seed', [
-    0,
-    1,
-])
-def test_chair_seen_by_a_camera_pitched_down(seed):
-    rotation = Rotation.from_rotvec((math.radians(10), 0.0, 0.0)).as_matrix()
-    depth, tips = shapes.render(rotate_about_camera(shapes.chair(seed=seed), rotation, 0.4),
-                                camera_height=0.4)
-    uv = shapes.K640.project(tips)
-    assert np.all((uv >= 0) & (uv < [640, 480]))  # premise: every tip is in view
-    est = estimate_frame(frame(depth), EndeffParams())
-    assert len(est.positions()) == len(tips)
-    assert np.all(tip_errors(tips, est.positions()) < TIP_TOLERANCE)
+@pytest.mark.parametrize('x', [0.0, 0.2])
+def test_chair_seen_by_a_camera_pitched_down(x):
+    shot = _shoot('chair', scenes.placed_chair(0.5, x=x), turned(LOW.height, math.radians(10),
+                                                                  0.0, 0.0))
+    uv = KINECT_640.project(shot.gt)
+    assert np.all((uv >= 0) & (uv < [640, 480]))  # premise: every end-effector is in view
+    est = estimate_frame(shot.frame, EndeffParams())
+    assert len(est.positions()) <= len(shot.gt)
+    assert np.all(tip_errors(shot.gt[CHAIR_LEGS], est.positions()) < TIP_TOLERANCE)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -268,9 +317,9 @@ def test_chair_seen_by_a_camera_pitched_down(seed):
 # ---------------------------------------------------------------------------------------------
 
 INVARIANCE_SCENES = [
-    pytest.param('star', 5, 0, id='star5'),
-    pytest.param('person', 't_pose', 0, id='t_pose'),
-    pytest.param('chair', 0.5, 0, id='chair'),
+    pytest.param('star', 5, 0.3, id='star5'),
+    pytest.param('person', 't_pose', 0.0, id='t_pose'),
+    pytest.param('chair', 0.5, 0.0, id='chair'),
     pytest.param('arm', None, 0, id='robot_arm'),
 ]
 
@@ -280,15 +329,15 @@ CLOUD_PARAMS = EndeffParams(voxel_size=0.0, floor_removal=False)
 
 
 @functools.cache
-def foreground(kind, arg, seed):
-    depth, _ = rendered(kind, arg, seed)
-    points, _ = foreground_cloud(depth, shapes.K640, EndeffParams())
+def foreground(kind, arg, variant):
+    points, _ = foreground_cloud(rendered(kind, arg, variant).frame.depth, KINECT_640,
+                                 EndeffParams())
     return points
 
 
-@pytest.mark.parametrize('kind, arg, seed', INVARIANCE_SCENES)
-def test_point_order_does_not_matter(kind, arg, seed):
-    points = foreground(kind, arg, seed)
+@pytest.mark.parametrize('kind, arg, variant', INVARIANCE_SCENES)
+def test_point_order_does_not_matter(kind, arg, variant):
+    points = foreground(kind, arg, variant)
     base = estimate_points(points, CLOUD_PARAMS)
     assert len(base.positions()) >= 2
     rng = np.random.default_rng(17)
@@ -308,11 +357,11 @@ def _random_rotation(rng, max_angle):
     return Rotation.from_rotvec(axis * rng.uniform(0.3, 1.0) * max_angle).as_matrix()
 
 
-@pytest.mark.parametrize('kind, arg, seed', INVARIANCE_SCENES)
-def test_camera_rotation_about_its_centre_rotates_the_tips(kind, arg, seed):
+@pytest.mark.parametrize('kind, arg, variant', INVARIANCE_SCENES)
+def test_camera_rotation_about_its_centre_rotates_the_tips(kind, arg, variant):
     """Turning the camera about its optical centre rotates the cloud and the viewing rays
     alike, so even the view-dependent part-radius step commutes with it (default params)."""
-    points = foreground(kind, arg, seed)
+    points = foreground(kind, arg, variant)
     base = estimate_points(points, CLOUD_PARAMS).positions()
     rng = np.random.default_rng(23)
     for _ in range(3):
@@ -321,13 +370,13 @@ def test_camera_rotation_about_its_centre_rotates_the_tips(kind, arg, seed):
         assert set_distance(moved, base @ rotation.T) < 0.02
 
 
-@pytest.mark.parametrize('kind, arg, seed', INVARIANCE_SCENES)
-def test_rigid_motion_moves_the_tips(kind, arg, seed):
+@pytest.mark.parametrize('kind, arg, variant', INVARIANCE_SCENES)
+def test_rigid_motion_moves_the_tips(kind, arg, variant):
     """Rotation + translation. The part-radius step pushes a tip along the viewing ray from the
     camera origin, which a translation of the cloud does not carry along (measured up to
     2-3.4 cm on the robot arm), so the geometric part is tested with max_part_radius = 0."""
     params = CLOUD_PARAMS.replace(max_part_radius=0.0)
-    points = foreground(kind, arg, seed)
+    points = foreground(kind, arg, variant)
     base = estimate_points(points, params).positions()
     rng = np.random.default_rng(29)
     for _ in range(3):
@@ -794,19 +843,35 @@ def test_a_chain_ends_in_a_full_sub_band(min_points, found_twig):
     assert (leaves['twig'] in [node for node, _, _ in found]) == found_twig
 
 
+@functools.cache
+def short_person(scale):
+    """A T-pose person ``scale`` times the 1.75 m model (its head protrudes less)."""
+    return scenes.shoot(scenes.person('t_pose', model=PersonModel(PersonStyle(scale=scale))))
+
+
 def test_t_pose_head_is_found_as_a_chain_below_g():
-    """The T-pose person's head protrudes less than g from the hands' paths (they cross the top
-    of the torso); the chain rule finds it, g alone does not."""
-    depth, tips = rendered('person', 't_pose', 0)
-    chains = estimate_frame(frame(depth), EndeffParams())
-    paper = estimate_frame(frame(depth), EndeffParams(chain_geodesic=0.3))
-    head = tips[0]
+    """A T-pose person's head can protrude less than g from the hands' paths (they cross the
+    top of the torso): for a 1.49 m person (scale 0.85) by 0.258 m (the 1.75 m model's head:
+    0.353 m, found by g alone). The chain rule finds it, g alone does not."""
+    shot = short_person(0.85)
+    chains = estimate_frame(shot.frame, EndeffParams())
+    paper = estimate_frame(shot.frame, EndeffParams(chain_geodesic=0.3))
+    head = shot.gt[HEAD]
     assert tip_errors(head[None], chains.positions())[0] < TIP_TOLERANCE
     assert tip_errors(head[None], paper.positions())[0] > 0.15
     (candidate,) = [c for c in chains.entities[0].candidates
                     if np.linalg.norm(c.position - head) < TIP_TOLERANCE]
     params = EndeffParams()
     assert params.chain_geodesic <= candidate.protrusion < params.min_geodesic
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the head of a 1.58 m T-pose person protrudes 0.232 m from the hands' paths, below "
+    'chain_geodesic (0.25 m): no end'))
+def test_t_pose_head_of_a_shorter_person():
+    shot = short_person(0.9)
+    est = estimate_frame(shot.frame, EndeffParams())
+    assert tip_errors(shot.gt[HEAD][None], est.positions())[0] < TIP_TOLERANCE
 
 
 def test_geodesics_eqs_6_and_7():
@@ -835,7 +900,7 @@ def test_approximate_geodesic_uses_the_middle_node_by_count():
 
 
 def test_candidates_carry_consistent_geodesics():
-    est, _ = estimated('star', 5, 0)
+    est, _ = estimated('star', 5, 0.3)
     entity = est.entities[0]
     g = entity.graph
     for c in entity.candidates:
@@ -855,19 +920,24 @@ def test_candidates_carry_consistent_geodesics():
 def test_an_end_cut_by_the_image_border_is_no_end_effector():
     """A star pushed to the right so that one limb leaves the image: the limb's stump at the
     border is where the view cuts the body, not an end; the other limbs' tips are found."""
-    scene = shapes.star(5, z=2.5)
-    depth, tips = shapes.render(scene, camera_height=1.1)
-    shift = 240  # pixels: the limb pointing right (limb 0, 0.3 rad off horizontal) leaves
+    shot = rendered('star', 5, 0.3)
+    depth, tips = shot.frame.depth, shot.gt
+    # Pixels: the limb pointing right (limb 0, 0.3 rad off horizontal) leaves the image, the
+    # one pointing down and right (limb 4) ends 20 px inside it.
+    shift = 220
     moved = np.full_like(depth, np.nan)
     moved[:, shift:] = depth[:, :-shift]
     z = tips[:, 2]
-    tips = tips + np.stack([shift * z / shapes.K640.fx, 0 * z, 0 * z], axis=1)
-    inside = shapes.K640.project(tips)[:, 0] < shapes.K640.width - 10
+    tips = tips + np.stack([shift * z / KINECT_640.fx, 0 * z, 0 * z], axis=1)
+    inside = KINECT_640.project(tips)[:, 0] < KINECT_640.width - 10
     assert inside.sum() == 4  # premise: exactly one tip left the image
     kept = estimate_frame(frame(moved), EndeffParams()).positions()
     kept_all = estimate_frame(frame(moved), EndeffParams(drop_cut_ends=False)).positions()
     dropped = [p for p in kept_all if not any(np.allclose(p, q) for q in kept)]
     assert len(dropped) == 1 and len(kept) == len(kept_all) - 1
-    assert shapes.K640.project(dropped[0][None])[0, 0] > shapes.K640.width - 10  # the stump
+    # The stump: at the border (its sub-band spans the 0.09 m thick limb, 19 px at 2.5 m, so
+    # the centroid lies up to about 10 px plus the part-radius step inside it), and no tip.
+    assert KINECT_640.project(dropped[0][None])[0, 0] > KINECT_640.width - 20
+    assert np.linalg.norm(tips[inside] - dropped[0], axis=1).min() > 0.15
     rows, cols, dist = match(tips[inside], kept)
     assert len(rows) == 4 and np.all(dist < 0.05), dist
