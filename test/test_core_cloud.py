@@ -1,7 +1,8 @@
 """Section 3 of the core (depth -> foreground cloud) and the input checks of the core types.
 
-Depth images are hand-made (a few pixels checked against the pinhole model) or rendered from the
-capsule scenes of :mod:`shapes`; every random draw is seeded.
+Depth images are hand-made (a few pixels checked against the pinhole model) or ray-cast from the
+synthetic scenes of :mod:`endeff_ros.synth.scenes` (the benchmark suites' bodies and renderer);
+every random draw is seeded.
 """
 
 from __future__ import annotations
@@ -11,8 +12,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-import shapes
-from scipy.spatial.transform import Rotation
 
 from endeff_ros.core.cloud import (
     MAX_RANGE_M,
@@ -25,8 +24,12 @@ from endeff_ros.core.cloud import (
 )
 from endeff_ros.core.errors import InputError, ParameterError
 from endeff_ros.core.params import EndeffParams
-from endeff_ros.core.types import Intrinsics, RGBDFrame
+from endeff_ros.core.types import KINECT_640, Intrinsics, RGBDFrame
 from endeff_ros.ros.convert import depth_image_to_array
+from endeff_ros.synth import scenes
+from endeff_ros.synth.body import Entity
+from endeff_ros.synth.render import Camera
+from endeff_ros.synth.shapes import box, capsule
 
 K_SMALL = Intrinsics(fx=50.0, fy=60.0, cx=3.5, cy=2.5, width=8, height=6)
 
@@ -41,14 +44,21 @@ def as_set(points, decimals=9):
     return {tuple(np.round(p, decimals)) for p in np.asarray(points)}
 
 
-rotate_about_camera = shapes.rotate_about_camera
-
-
-def scene_points(scene, camera_height=1.1):
-    """Rendered depth -> all valid points inside the default foreground box."""
-    depth, _ = shapes.render(scene, camera_height=camera_height)
-    points = depth_to_points(depth, shapes.K640, stride=2)
+def scene_points(shot):
+    """A rendered ``scenes.Shot`` -> all valid points inside the default foreground box."""
+    points = depth_to_points(shot.frame.depth, KINECT_640, stride=2)
     return points[box_mask(points, EndeffParams())]
+
+
+def tilted(pitch_deg, roll_deg, height=1.1):
+    """A camera ``height`` m up, pitched down by ``pitch_deg`` and rolled by ``roll_deg``."""
+    return Camera(KINECT_640, height=height, pitch=math.radians(pitch_deg),
+                  roll=math.radians(roll_deg), frame_id='camera')
+
+
+def up(camera):
+    """The floor's upward normal in the camera's optical frame."""
+    return camera.rotation @ np.array([0.0, 1.0, 0.0])
 
 
 def floor_args(params=None):
@@ -173,67 +183,65 @@ def _angle_deg(a, b):
     return math.degrees(math.acos(min(1.0, abs(cos))))
 
 
-@pytest.mark.parametrize('rotvec', [
-    pytest.param((0.0, 0.0, 0.0), id='level'),
-    pytest.param((math.radians(10), 0.0, 0.0), id='pitched-down-10deg'),
-    pytest.param((math.radians(-6), 0.0, 0.0), id='pitched-up-6deg'),
-    pytest.param((0.0, 0.0, math.radians(10)), id='rolled-10deg'),
-    pytest.param((math.radians(8), 0.0, math.radians(-8)), id='pitched-and-rolled-8deg'),
+@pytest.mark.parametrize('pitch, roll', [
+    pytest.param(0.0, 0.0, id='level'),
+    pytest.param(10.0, 0.0, id='pitched-down-10deg'),
+    pytest.param(-6.0, 0.0, id='pitched-up-6deg'),
+    pytest.param(0.0, 10.0, id='rolled-10deg'),
+    pytest.param(8.0, -8.0, id='pitched-and-rolled-8deg'),
 ])
-def test_fit_floor_finds_a_tilted_floor(rotvec):
-    height = 1.1
-    rotation = Rotation.from_rotvec(rotvec).as_matrix()
-    scene = rotate_about_camera(shapes.person('arms_down', seed=2), rotation, height)
-    points = scene_points(scene, height)
+def test_fit_floor_finds_a_tilted_floor(pitch, roll):
+    camera = tilted(pitch, roll)
+    points = scene_points(scenes.shoot(scenes.person('arms_down', x=0.2), camera))
     floor = fit_floor(points, rng=np.random.default_rng(0), **floor_args())
     assert floor is not None
-    # World up is optical -y; the turned camera sees it as rotation @ (0, -1, 0); the camera
-    # centre is `height` above the floor.
-    up = rotation @ np.array([0.0, -1.0, 0.0])
-    assert _angle_deg(floor.normal, up) < 1.0
-    assert floor.normal @ up > 0  # oriented upwards
+    # The floor's normal is the camera's view of the scene's up; the camera centre is
+    # `height` above the floor.
+    assert _angle_deg(floor.normal, up(camera)) < 1.0
+    assert floor.normal @ up(camera) > 0  # oriented upwards
     assert np.linalg.norm(floor.normal) == pytest.approx(1.0)
-    assert floor.offset == pytest.approx(height, abs=0.01)
+    assert floor.offset == pytest.approx(camera.height, abs=0.01)
     # The floor's points are the ones it explains: the lowest visible points are on it.
     heights = floor.distance(points)
     assert np.count_nonzero(heights < -3 * EndeffParams().floor_distance) == 0
 
 
 def test_foreground_cloud_removes_the_tilted_floor_and_reports_it():
-    height = 1.1
-    rotation = Rotation.from_rotvec((math.radians(10), 0.0, 0.0)).as_matrix()
-    scene = rotate_about_camera(shapes.person('t_pose', seed=1), rotation, height)
-    depth, _ = shapes.render(scene, camera_height=height)
+    camera = tilted(10.0, 0.0)
+    person = scenes.person('t_pose')
+    head = person.prims[person.parts['head']]
+    top = head.center[1] + head.size[1]  # the head ellipsoid is upright: 1.73 m
     params = EndeffParams()
-    points, floor = foreground_cloud(depth, shapes.K640, params)
+    points, floor = foreground_cloud(scenes.shoot(person, camera).frame.depth, KINECT_640,
+                                     params)
     assert floor is not None
-    assert _angle_deg(floor.normal, rotation @ [0.0, -1.0, 0.0]) < 1.0
+    assert _angle_deg(floor.normal, up(camera)) < 1.0
     assert np.all(floor.distance(points) > params.floor_distance - 1e-9)
-    # What is left is the person: from just above the floor to the top of the head (1.74 m).
+    # What is left is the person: from just above the floor to the top of the head.
     heights = floor.distance(points)
-    assert heights.max() == pytest.approx(1.74, abs=0.05)
+    assert heights.max() == pytest.approx(top, abs=0.02)
     assert heights.min() < 0.08  # feet are kept (they stand on the floor)
 
 
 def test_fit_floor_none_for_a_floating_star():
-    points = scene_points(shapes.star(5, seed=1))
+    points = scene_points(scenes.shoot(scenes.star(5), floor=False))
     assert len(points) > 1000
     assert fit_floor(points, rng=np.random.default_rng(0), **floor_args()) is None
 
 
-def _table(top_y=0.75, seed=0):
-    """A table without a floor: a flat 1.2 x 0.8 m top on four legs (the legs are below it)."""
-    rng = np.random.default_rng(seed)
-    s = shapes.Scene([], [])
-    s.add_box([-0.6, top_y - 0.03, 2.0], [0.6, top_y, 2.8], rng, density=4e5)
-    for x in (-0.55, 0.55):
-        for z in (2.05, 2.75):
-            s.add_capsule([x, 0.0, z], [x, top_y - 0.03, z], 0.035, rng)
-    return s
+def _table(top_y=0.75):
+    """A table 2.0-2.8 m from the camera: a flat 1.2 x 0.8 m top, 3 cm thick, on four legs
+    (the legs are below it). No end-effectors."""
+    wood, eye = (0.5, 0.35, 0.2), np.eye(3)
+    prims = [box([0.0, top_y - 0.015, -2.4], eye, [0.6, 0.015, 0.4], wood, 0, 'top')]
+    prims += [capsule([x, 0.0, z], [x, top_y - 0.03, z], 0.035, [1, 0, 0], wood, 1, 'leg')
+              for x in (-0.55, 0.55) for z in (-2.05, -2.75)]
+    return Entity(prims, np.zeros((0, 3)), np.zeros(0, np.uint32), np.zeros(0, np.int64),
+                  np.zeros(0))
 
 
 def test_fit_floor_none_when_the_only_horizontal_surface_has_points_below():
-    points = scene_points(_table())
+    points = scene_points(scenes.shoot(_table(), floor=False))
     params = EndeffParams()
     # Premise: the table top alone would qualify as a floor by size and tilt (it holds more
     # than floor_min_fraction of the points, and it is level) ...
@@ -246,9 +254,8 @@ def test_fit_floor_none_when_the_only_horizontal_surface_has_points_below():
 
 
 def test_fit_floor_prefers_the_floor_under_a_table():
-    scene = _table()
-    scene.add_floor(np.random.default_rng(1))
-    floor = fit_floor(scene_points(scene), rng=np.random.default_rng(0), **floor_args())
+    points = scene_points(scenes.shoot(_table()))
+    floor = fit_floor(points, rng=np.random.default_rng(0), **floor_args())
     assert floor is not None
     assert _angle_deg(floor.normal, [0.0, -1.0, 0.0]) < 1.0
     assert floor.offset == pytest.approx(1.1, abs=0.01)
@@ -327,22 +334,22 @@ def test_bad_intrinsics(make, message):
 
 
 @pytest.mark.parametrize('make, message', [
-    pytest.param(lambda: RGBDFrame(0, 'cam', DEPTH[:240, :320], shapes.K640),
+    pytest.param(lambda: RGBDFrame(0, 'cam', DEPTH[:240, :320], KINECT_640),
                  r'depth image is 320x240 but camera info says 640x480',
                  id='frame-depth-vs-intrinsics'),
-    pytest.param(lambda: RGBDFrame(0, 'cam', DEPTH, shapes.K640,
+    pytest.param(lambda: RGBDFrame(0, 'cam', DEPTH, KINECT_640,
                                    color=np.zeros((240, 320, 3), np.uint8)),
                  r'colour image is 320x240 but depth is 640x480', id='frame-colour-vs-depth'),
-    pytest.param(lambda: RGBDFrame(0, 'cam', DEPTH[:, :, None], shapes.K640),
+    pytest.param(lambda: RGBDFrame(0, 'cam', DEPTH[:, :, None], KINECT_640),
                  r'depth must be a 2-D image, got shape \(480, 640, 1\)', id='frame-3d-depth'),
-    pytest.param(lambda: depth_to_points(DEPTH[:, :320], shapes.K640),
+    pytest.param(lambda: depth_to_points(DEPTH[:, :320], KINECT_640),
                  r'depth image is 320x480 but the intrinsics are for 640x480',
                  id='points-depth-vs-intrinsics'),
-    pytest.param(lambda: depth_to_points(DEPTH[0], shapes.K640),
+    pytest.param(lambda: depth_to_points(DEPTH[0], KINECT_640),
                  r'depth must be 2-D, got shape \(640,\)', id='points-1d-depth'),
-    pytest.param(lambda: depth_to_points(np.full((480, 640), 2000, np.uint16), shapes.K640),
+    pytest.param(lambda: depth_to_points(np.full((480, 640), 2000, np.uint16), KINECT_640),
                  r'depth must be float metres, got dtype uint16', id='points-uint16-depth'),
-    pytest.param(lambda: depth_to_points(np.full((480, 640), 2, np.int32), shapes.K640),
+    pytest.param(lambda: depth_to_points(np.full((480, 640), 2, np.int32), KINECT_640),
                  r'depth must be float metres, got dtype int32', id='points-int32-depth'),
 ])
 def test_bad_frames(make, message):
@@ -351,7 +358,7 @@ def test_bad_frames(make, message):
 
 
 def test_good_frame_with_colour_is_accepted():
-    frame = RGBDFrame(0, 'cam', DEPTH, shapes.K640, color=np.zeros((480, 640, 3), np.uint8))
+    frame = RGBDFrame(0, 'cam', DEPTH, KINECT_640, color=np.zeros((480, 640, 3), np.uint8))
     assert frame.depth.shape == (480, 640)
 
 
