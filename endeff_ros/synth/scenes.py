@@ -102,13 +102,14 @@ def person(pose: str | PersonPose = 't_pose', *, x: float = 0.0, z: float = -2.8
 
 
 def star(n_limbs: int = 5, *, z: float = -2.5, keep: tuple[int, ...] | None = None,
-         height: float = 1.2, spin: float = 0.3) -> Entity:
+         height: float = 1.2, spin: float = 0.3, length: float = 0.55) -> Entity:
     """A flat star facing the camera: a hub (ellipsoid 0.14 x 0.14 x 0.10 m) ``height`` m up
     with ``n_limbs`` straight limbs in the image plane, limb i at ``spin + 2 pi i / n_limbs``
     rad from the camera's right (counter-clockwise as seen). A limb is built as those of
-    ``body.star``: segments of 0.22 m (radius 0.055) and 0.20 m (0.045) and an end cap sphere
-    (radius 0.065) 0.55 m from the hub centre, whose centre is the end-effector (id i). Only
-    the limbs in ``keep`` are built (all by default)."""
+    ``body.star`` (``length`` 0.55): a segment of radius 0.055 from 0.10 to 0.32 m out, one of
+    radius 0.045 on to the end cap, a sphere of radius 0.065 ``length`` m from the hub centre
+    whose centre is the end-effector (id i). Only the limbs in ``keep`` are built (all by
+    default)."""
     hub = np.array([0.0, height, z])
     color, tex = (0.85, 0.55, 0.15), 40
     prims = [ellipsoid(hub, rot_x(0.0), [0.14, 0.14, 0.10], color, tex, 'hub')]
@@ -119,7 +120,7 @@ def star(n_limbs: int = 5, *, z: float = -2.5, keep: tuple[int, ...] | None = No
         a = spin + 2 * np.pi * k / n_limbs
         d = np.array([np.cos(a), np.sin(a), 0.0])
         j0, j1 = hub + 0.10 * d, hub + 0.32 * d
-        cap = hub + 0.55 * d
+        cap = hub + length * d
         prims.append(capsule(j0, j1, 0.055, [0, 0, 1], color, tex + 1 + k, f'limb{k}_a'))
         prims.append(capsule(j1, cap - 0.03 * d, 0.045, [0, 0, 1], color, tex + 6 + k,
                              f'limb{k}_b'))
