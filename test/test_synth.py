@@ -14,11 +14,11 @@ import pytest
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from endeff_ros.synth import GROUPS, SEQUENCES, render_person_frame, render_sequence
+from endeff_ros.synth import GROUPS, SEQUENCES, render_person_frame, render_sequence, scenes
 from endeff_ros.synth import cli as synth_cli
 from endeff_ros.synth import sheet as synth_sheet
 from endeff_ros.synth.frames import COLOR_JITTER_NS, PERIOD_NS, T0_NS, dropped_frames
-from endeff_ros.synth.render import FLOOR, WALL, background, default_camera, render
+from endeff_ros.synth.render import FLOOR, WALL, background, default_camera, normals, render
 from endeff_ros.synth.sequences import (
     PERSON_SEQUENCES,
     QUICK_FRAMES,
@@ -27,7 +27,7 @@ from endeff_ros.synth.sequences import (
     frame_time,
     scene,
 )
-from endeff_ros.synth.shapes import surface_distance
+from endeff_ros.synth.shapes import _inside, box, capsule, ellipsoid, rot_y, surface_distance
 
 TOPICS = {
     '/camera/color/image_raw': 'sensor_msgs/msg/Image',
@@ -318,6 +318,62 @@ def test_person_frame():
         assert 2.3 < f.gt[:, 2].mean() < 3.0
     with pytest.raises(ValueError):
         render_person_frame('handstand')
+
+
+def test_scene_shot_is_the_ideal_render_with_its_ground_truth():
+    """``scenes.shoot``: the depth is the ray caster's (NaN where nothing is hit), the ground
+    truth its optical-frame centres; without floor only the entity has depth; the person in
+    ``POSES`` is the one ``render_person_frame`` draws (same hands and feet)."""
+    person = scenes.person('t_pose', z=-2.5)
+    shot = scenes.shoot(person, default_camera())
+    ren = render(person, default_camera())
+    np.testing.assert_array_equal(np.isfinite(shot.frame.depth), np.isfinite(ren.z))
+    np.testing.assert_allclose(shot.frame.depth[np.isfinite(ren.z)], ren.z[np.isfinite(ren.z)],
+                               rtol=1e-6)
+    np.testing.assert_allclose(shot.gt, ren.gt)
+    np.testing.assert_allclose(shot.gt, render_person_frame('t_pose').gt, atol=1e-9)
+    assert shot.gt_visible.all()
+    for k in range(5):  # each end-effector is the centre of its part
+        np.testing.assert_allclose(shot.part(k).center, shot.gt[k], atol=1e-9)
+    floating = scenes.shoot(person, default_camera(), floor=False)
+    entity = floating.frame.depth[np.isfinite(floating.frame.depth)]
+    assert 15_000 < entity.size < np.isfinite(shot.frame.depth).sum() / 4
+    assert entity.max() < 3.0  # no floor, no wall
+    with pytest.raises(ValueError, match='pose must be one of'):
+        scenes.person('handstand')
+
+
+@pytest.mark.parametrize('n, keep', [(3, None), (6, None), (5, (1, 2, 4))])
+def test_scene_star_limbs(n, keep):
+    """``scenes.star``: one end cap per kept limb, ``length`` m from the hub, ids = limb
+    indices, in the image plane, each end cap seen from a level camera."""
+    star = scenes.star(n, keep=keep, length=0.5)
+    ids = list(range(n)) if keep is None else list(keep)
+    assert list(star.gt_ids) == ids
+    hub = star.prims[0].center
+    np.testing.assert_allclose(np.linalg.norm(star.gt - hub, axis=1), 0.5)
+    np.testing.assert_allclose(star.gt[:, 2], hub[2])
+    angles = np.arctan2(star.gt[:, 1] - hub[1], star.gt[:, 0] - hub[0])
+    np.testing.assert_allclose(np.cos(angles - 0.3 - 2 * np.pi * np.array(ids) / n), 1.0)
+    assert scenes.shoot(star, floor=False).gt_visible.all()
+
+
+@pytest.mark.parametrize('part', [
+    capsule([0.1, 0.2, -2.0], [0.4, 0.5, -2.2], 0.05, [0, 0, 1], (1, 1, 1), 0, 'limb'),
+    box([0.0, 0.5, -2.0], rot_y(0.4), [0.2, 0.05, 0.1], (1, 1, 1), 0, 'seat'),
+    ellipsoid([0.0, 1.0, -2.5], rot_y(0.3), [0.08, 0.08, 0.08], (1, 1, 1), 0, 'cap'),
+])
+def test_distance_to_part(part):
+    """0 inside the solid, positive outside, and exactly the step for points stepped out of
+    the surface along its outward normal."""
+    rng = np.random.default_rng(3)
+    points = part.center + rng.uniform(-0.5, 0.5, (400, 3))
+    d = scenes.distance_to_part(part, points)
+    assert np.all(d[_inside(part, points)] == 0) and np.all(d[~_inside(part, points)] > 0)
+    surface = part.surface_points(200)
+    d = scenes.distance_to_part(part, surface + 0.07 * normals(part, surface))
+    np.testing.assert_allclose(d, 0.07, atol=1e-9)
+    assert np.all(scenes.distance_to_part(part, surface - 0.01 * normals(part, surface)) == 0)
 
 
 def test_contact_sheet(bag_dir, tmp_path):
