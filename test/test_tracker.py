@@ -210,7 +210,7 @@ def test_clap_contact_spurious_candidate_not_tracked():
     'with the hands at 1.25 m, 0.30 m in front (as the clapping sequence) and the elbows lower, '
     'the contact leaves candidates on both forearms; the one 0.21 m from the left hand has an '
     "Eq. 7 distance of 0.957 m, longer than the hand's memorised 0.85 m, so it wins case B "
-    "and the hand's track follows it"))
+    "and the hand's track follows it (core at fbd66d8)"))
 def test_clap_with_lower_elbows_tracker_keeps_both_hands():
     r = run(clap(clap=(1.25, 0.30, (-1.0, -0.4, -0.2))), EndeffParams(keep_frames=5))
     for i in r.labels('contact'):
@@ -244,7 +244,8 @@ def test_folded_arm_wrong_end_effector_replaced_by_hand():
     'the wrong track takes the hand in frame 2 (case B, candidate wins), but the hand then '
     'moves 0.26 m in one frame while the forearm swings up; with no colour the prediction '
     'stays put, more than max_rectify_distance (0.15 m) from every point of frame 3, so the '
-    'track is dropped as having left the foreground and a new id takes the hand'))
+    'track is dropped as having left the foreground and a new id takes the hand (core at '
+    'fbd66d8)'))
 def test_folded_arm_wrong_track_moves_to_the_hand():
     """Case B, candidate wins (Fig. 7c): the wrong track follows the hand (same id)."""
     r = run(unfold(), EndeffParams(keep_frames=3))
