@@ -40,7 +40,8 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
+
+from .core.assignment import min_cost_assignment
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Sequence
@@ -120,8 +121,9 @@ def score_frame(estimated: npt.ArrayLike | None, ground_truth: npt.ArrayLike | N
                 threshold: float = MATCH_THRESHOLD_M) -> FrameScore:
     """Match (M, 3) ``estimated`` to (N, 3) ``ground_truth`` positions (metres), one-to-one.
 
-    Hungarian assignment (``scipy.optimize.linear_sum_assignment``) minimising the total
-    Euclidean distance; matched pairs within ``threshold`` metres are true positives.
+    Hungarian assignment (:func:`~endeff_ros.core.assignment.min_cost_assignment`)
+    minimising the total Euclidean distance; matched pairs within ``threshold`` metres are
+    true positives.
 
     Raises
     ------
@@ -136,7 +138,7 @@ def score_frame(estimated: npt.ArrayLike | None, ground_truth: npt.ArrayLike | N
     if len(est) == 0 or len(gt) == 0:
         return FrameScore(len(gt), len(est), 0, np.zeros(0), np.zeros((0, 2), dtype=np.intp))
     dist = np.linalg.norm(est[:, None, :] - gt[None, :, :], axis=2)
-    rows, cols = linear_sum_assignment(dist)
+    rows, cols = min_cost_assignment(dist)
     d = dist[rows, cols]
     ok = d <= threshold
     matches = np.stack([rows[ok], cols[ok]], axis=1).astype(np.intp)

@@ -16,10 +16,10 @@ import math
 import numpy as np
 import pytest
 from scipy import sparse
-from scipy.optimize import linear_sum_assignment
 from scipy.sparse import csgraph
 from scipy.spatial.transform import Rotation
 
+from endeff_ros.core.assignment import min_cost_assignment
 from endeff_ros.core.bands import (
     UNREACHED,
     Neighbours,
@@ -76,7 +76,7 @@ def match(tips, candidates):
     if len(tips) == 0 or len(candidates) == 0:
         return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
     d = np.linalg.norm(tips[:, None] - candidates[None], axis=2)
-    rows, cols = linear_sum_assignment(d)
+    rows, cols = min_cost_assignment(d)
     return rows, cols, d[rows, cols]
 
 

@@ -39,8 +39,8 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
+from .assignment import min_cost_assignment
 from .background import BackgroundModel
 from .bands import UNREACHED
 from .cloud import FloorPlane
@@ -323,7 +323,7 @@ class Tracker:
         cand_entity = [e.entity for e in estimate.entities for _ in e.candidates]
         preds = self._rectify(estimate, predicted)
         sim, geo = self._similarity(estimate, preds, cands)
-        rows, cols = (linear_sum_assignment(-sim) if sim.size
+        rows, cols = (min_cost_assignment(-sim) if sim.size
                       else (np.zeros(0, int), np.zeros(0, int)))
         matched_pred: dict[int, int] = {}
         for i, j in zip(rows, cols):
