@@ -174,8 +174,11 @@ def test_interrupt_leaves_nothing(tmp_path: Path, sig: int, status: int, jobs: i
         write_bag(ins[-1], BagSpec(frames=120, width=32, height=24, fx=10.0, blob_px=1))
     out = tmp_path / 'out'
     code = _SLOW_RUN.format(test_dir=str(TEST_DIR))
+    # A shell starts background jobs with SIGINT ignored, and Python then installs no handler
+    # for it: the child gets the default disposition back, as a terminal's process has.
     proc = subprocess.Popen([sys.executable, '-c', code, 'process', *map(str, ins), '-o',
-                             str(out), '--jobs', str(jobs)], stderr=subprocess.PIPE, text=True)
+                             str(out), '--jobs', str(jobs)], stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 60
     parent = out.parent if jobs == 1 else out
     while len(_leftovers(parent)) < jobs and time.monotonic() < deadline:

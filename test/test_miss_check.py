@@ -1,0 +1,55 @@
+"""tools.miss_check: every ground-truth point and reported end-effector in one class."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from endeff_ros.bag.reader import BagReader
+from endeff_ros.core.params import EndeffParams
+from endeff_ros.synth.proc_clips import walk_clip, wave_clip
+from endeff_ros.synth.rooms_suite import rooms_specs
+from endeff_ros.synth.suite import write_bag
+from tools import miss_check
+
+
+@pytest.fixture(scope='module')
+def room_bag(tmp_path_factory):
+    clips = [walk_clip(40, name='walk_a'), wave_clip(40, name='wave_a', split='dev')]
+    byname = {c.name: c for c in clips}
+    out = tmp_path_factory.mktemp('rooms')
+    spec = next(s for s in rooms_specs(clips, quick=True)
+                if s.pan is None and '-empty-' in s.name)
+    write_bag(spec, byname, out)
+    bag = out / 'mcap' / spec.name
+    with BagReader(bag) as reader:
+        points = sum(len(gt) for _, gt in reader.frames() if gt is not None)
+    return bag, points
+
+
+def test_every_point_gets_one_class(room_bag):
+    bag, points = room_bag
+    r = miss_check.check_bag(bag)
+    assert sum(r['ground_truth'].values()) == points
+    assert r['ground_truth']['found'] > 0
+    assert r['reported']['tp'] > 0
+
+
+def test_a_box_that_holds_nothing_puts_every_point_outside_it(room_bag):
+    bag, points = room_bag
+    params = dataclasses.replace(EndeffParams(), box_min_z=0.4, box_max_z=0.5)
+    r = miss_check.check_bag(bag, params)
+    assert r['ground_truth']['outside_box'] == points
+    assert sum(r['reported'].values()) == 0
+
+
+def test_report_shares_and_refuses_an_empty_folder(room_bag, tmp_path, capsys):
+    bag, _ = room_bag
+    assert miss_check.main([str(bag.parent), '--json', str(tmp_path / 'r.json')]) == 0
+    report = (tmp_path / 'r.json').read_text()
+    assert '"outside_box"' in report and '"fp_far"' in report
+    with pytest.raises(SystemExit) as exc:
+        miss_check.main([str(tmp_path / 'none')])
+    assert exc.value.code == 2
+    assert 'no bags' in capsys.readouterr().err

@@ -1,0 +1,141 @@
+"""Where recall and precision are lost: every ground-truth point and every reported
+end-effector of the temporal estimator, put in one class each.
+
+Ground-truth points (the first class that applies):
+
+- ``outside_box``: the point lies outside the foreground box (Section 3 never sees it);
+- ``hidden``: no depth reading of the frame lies within ``SURFACE_M`` of it (occluded,
+  beyond the sensor's range, or a dropout);
+- ``removed``: the depth sees it, but no foreground point (after the box, the floor and the
+  static background) lies within ``SURFACE_M``: the floor or the background took it;
+- ``found``: a reported end-effector lies within the match threshold (0.15 m);
+- ``missed``: in the foreground, nothing reported near it (the bands, graph or tracker).
+
+Reported end-effectors: ``tp`` (within 0.15 m of a ground-truth point), ``fp_body`` (within
+``BODY_M`` of one: an elbow, a knee, a shoulder), ``fp_far`` (farther: furniture, walls,
+floor, noise); false positives in the first ``EARLY_S`` of a bag (the background's learning
+time and the tracks that outlive it) are counted apart as ``*_early``.
+Nearest-point classes, not the Hungarian matching of ``endeff eval``: a tally of causes, not
+a score.
+
+    python -m tools.miss_check BAG_OR_DIR [...] [--every N] [--params YAML] [--jobs 2]
+                               [--json OUT]
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from endeff_ros.bag.reader import BagReader
+from endeff_ros.cli_common import load_params_option, print_json
+from endeff_ros.core.cloud import box_mask, depth_to_points
+from endeff_ros.core.errors import InputError
+from endeff_ros.core.params import EndeffParams
+from endeff_ros.core.tracker import Tracker
+from endeff_ros.scoring import MATCH_THRESHOLD_M
+
+SURFACE_M = 0.12  # a part's centre lies up to about its radius behind the visible surface
+BODY_M = 0.6
+EARLY_S = 0.5
+GT_CLASSES = ('found', 'missed', 'removed', 'hidden', 'outside_box')
+EST_CLASSES = ('tp', 'fp_body', 'fp_far', 'fp_body_early', 'fp_far_early')
+
+
+def _nearest(points: np.ndarray, queries: np.ndarray) -> np.ndarray:
+    if len(points) == 0:
+        return np.full(len(queries), np.inf)
+    return cKDTree(points).query(queries)[0]
+
+
+def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
+    """Class counts of one bag's ground-truth points and reported end-effectors."""
+    p = params or EndeffParams()
+    tracker = Tracker(p)
+    gt_counts = dict.fromkeys(GT_CLASSES, 0)
+    est_counts = dict.fromkeys(EST_CLASSES, 0)
+    first = None
+    with BagReader(bag) as reader:
+        for frame, gt in reader.frames():
+            first = frame.stamp_ns if first is None else first
+            try:
+                result = tracker.update(frame)
+            except InputError:
+                continue
+            if gt is None:
+                continue
+            gt = gt[:, :3]
+            est = np.array([t.position for t in result.tracks]).reshape(-1, 3)
+            fg = result.estimate.points
+            seen = depth_to_points(frame.depth, frame.intrinsics, stride=p.pixel_stride)
+            d_est = _nearest(est, gt)
+            d_seen = _nearest(seen, gt)
+            d_fg = _nearest(fg, gt)
+            inside = box_mask(gt, p)
+            for k in range(len(gt)):
+                if not inside[k]:
+                    cls = 'outside_box'
+                elif d_seen[k] > SURFACE_M:
+                    cls = 'hidden'
+                elif d_fg[k] > SURFACE_M:
+                    cls = 'removed'
+                elif d_est[k] <= MATCH_THRESHOLD_M:
+                    cls = 'found'
+                else:
+                    cls = 'missed'
+                gt_counts[cls] += 1
+            early = (frame.stamp_ns - first) * 1e-9 < EARLY_S
+            for d in _nearest(gt, est):
+                cls = ('tp' if d <= MATCH_THRESHOLD_M else 'fp_body' if d <= BODY_M
+                       else 'fp_far')
+                est_counts[cls + ('_early' if early and cls != 'tp' else '')] += 1
+    return {'bag': bag.name, 'ground_truth': gt_counts, 'reported': est_counts}
+
+
+def _job(args: tuple[Path, EndeffParams | None]) -> dict[str, Any]:
+    return check_bag(*args)
+
+
+def _shares(rows: list[dict[str, Any]], key: str) -> dict[str, Any]:
+    total = {k: sum(r[key][k] for r in rows) for k in rows[0][key]} if rows else {}
+    n = sum(total.values())
+    return {'count': n, **{k: round(v / n, 3) if n else None for k, v in total.items()}}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('bags', nargs='+', help='bags, or folders holding bags')
+    parser.add_argument('--every', type=int, default=1, help='every N-th bag (sorted by name)')
+    parser.add_argument('--params', help='parameter YAML (default: the defaults)')
+    parser.add_argument('--jobs', type=int, default=1)
+    parser.add_argument('--json', help='also write the report here')
+    args = parser.parse_args(argv)
+    params = load_params_option(args.params, 'miss_check')
+    bags: list[Path] = []
+    for arg in map(Path, args.bags):
+        if (arg / 'metadata.yaml').is_file():
+            bags.append(arg)
+        else:
+            bags.extend(sorted(q.parent for q in arg.glob('*/metadata.yaml')))
+    bags = sorted(bags)[::max(1, args.every)]
+    if not bags:
+        parser.error('no bags (folders with metadata.yaml) given')
+    jobs = [(b, params) for b in bags]
+    if args.jobs > 1:
+        import multiprocessing
+
+        with multiprocessing.get_context('spawn').Pool(args.jobs) as pool:
+            per_bag = pool.map(_job, jobs)
+    else:
+        per_bag = [_job(j) for j in jobs]
+    print_json({'ground_truth': _shares(per_bag, 'ground_truth'),
+                'reported': _shares(per_bag, 'reported'), 'bags': per_bag}, args.json)
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
