@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..core.types import Intrinsics
-from .body import PersonModel, PersonPose, Placement
+from . import scenes
 from .render import Camera, default_camera, render
 from .sensor import color_image, depth_image, depth_to_mm
 from .sequences import SEQUENCES, SPECS, frame_time, n_frames, scene
@@ -121,16 +121,7 @@ def render_person_frame(pose_name: str = 't_pose', seed: int = 0) -> SynthFrame:
     ``pose_name``: ``'t_pose'`` (arms straight out sideways) or ``'arms_down'`` (arms hanging a
     little away from the body).
     """
-    if pose_name not in ('t_pose', 'arms_down'):
-        msg = f"pose_name must be 't_pose' or 'arms_down', got {pose_name!r}"
-        raise ValueError(msg)
-    model = PersonModel()
-    sl, sr = model.shoulders(np.zeros(3))
-    abd = np.deg2rad(90 if pose_name == 't_pose' else 14)
-    al, ar = model.standing_ankles(0.12)
-    pose = PersonPose(hand_l=model.arm_target(sl, 1, abd, 0.0, 0.99),
-                      hand_r=model.arm_target(sr, -1, abd, 0.0, 0.99), ankle_l=al, ankle_r=ar)
-    ent = Placement(0.0, -2.5).apply(model.build(pose))
+    ent = scenes.person(pose_name, z=-2.5)
     cam = default_camera()
     return _frame(f'person:{pose_name}', 0, 0.0, seed, cam, T0_NS, T0_NS, False, False,
                   entity=ent)
