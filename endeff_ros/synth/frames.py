@@ -15,8 +15,8 @@ import numpy as np
 import numpy.typing as npt
 
 from ..core.types import Intrinsics
-from . import scenes
 from .render import Camera, default_camera, render
+from .scenes import person
 from .sensor import color_image, depth_image, depth_to_mm
 from .sequences import SEQUENCES, SPECS, frame_time, n_frames, scene
 
@@ -121,7 +121,7 @@ def render_person_frame(pose_name: str = 't_pose', seed: int = 0) -> SynthFrame:
     ``pose_name``: ``'t_pose'`` (arms straight out sideways) or ``'arms_down'`` (arms hanging a
     little away from the body).
     """
-    ent = scenes.person(pose_name, z=-2.5)
+    ent = person(pose_name, z=-2.5)
     cam = default_camera()
     return _frame(f'person:{pose_name}', 0, 0.0, seed, cam, T0_NS, T0_NS, False, False,
                   entity=ent)
