@@ -99,7 +99,7 @@ class EndeffParams:
     min_geodesic: float = _p(0.3, 'Iterated Dijkstra stops when the farthest node is closer '
                              'than this to the already found paths.', symbol='g', unit='m',
                              lo=0.0, hi=10.0)
-    chain_geodesic: float = _p(0.25, 'Iterated Dijkstra also accepts an extreme closer than g '
+    chain_geodesic: float = _p(0.2, 'Iterated Dijkstra also accepts an extreme closer than g '
                                'but not closer than this if it ends a chain: chain_subbands '
                                'sub-bands to the found paths, a local maximum of the geodesic '
                                'distance to the root, no sliver; >= g: g alone.',
