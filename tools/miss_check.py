@@ -38,6 +38,7 @@ from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.tracker import Tracker
 from endeff_ros.scoring import MATCH_THRESHOLD_M
+from tools.per_bag import run_per_bag
 
 SURFACE_M = 0.12  # a part's centre lies up to about its radius behind the visible surface
 BODY_M = 0.6
@@ -96,9 +97,6 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
     return {'bag': bag.name, 'ground_truth': gt_counts, 'reported': est_counts}
 
 
-def _job(args: tuple[Path, EndeffParams | None]) -> dict[str, Any]:
-    return check_bag(*args)
-
 
 def _shares(rows: list[dict[str, Any]], key: str) -> dict[str, Any]:
     total = {k: sum(r[key][k] for r in rows) for k in rows[0][key]} if rows else {}
@@ -124,14 +122,7 @@ def main(argv: list[str] | None = None) -> int:
     bags = sorted(bags)[::max(1, args.every)]
     if not bags:
         parser.error('no bags (folders with metadata.yaml) given')
-    jobs = [(b, params) for b in bags]
-    if args.jobs > 1:
-        import multiprocessing
-
-        with multiprocessing.get_context('spawn').Pool(args.jobs) as pool:
-            per_bag = pool.map(_job, jobs)
-    else:
-        per_bag = [_job(j) for j in jobs]
+    per_bag = run_per_bag(check_bag, bags, params, args.jobs)
     print_json({'ground_truth': _shares(per_bag, 'ground_truth'),
                 'reported': _shares(per_bag, 'reported'), 'bags': per_bag}, args.json)
     return 0

@@ -28,6 +28,7 @@ from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.tracker import Tracker
 from endeff_ros.scoring import score_frame
 from endeff_ros.synth.suite import DETAILS_KEY
+from tools.per_bag import run_per_bag
 
 CLEAN_AFTER_NS = 2_000_000_000
 
@@ -75,9 +76,6 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
             'fp_per_frame_after_2s': float(np.mean([r[1] for r in after])) if after else None}
 
 
-def _job(args: tuple[Path, EndeffParams | None]) -> dict[str, Any]:
-    return check_bag(*args)
-
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
@@ -90,14 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     bags = sorted(p for p in Path(args.folder).glob('*-pan') if (p / 'metadata.yaml').is_file())
     if not bags:
         parser.error(f'no pan bags (*-pan) in {args.folder}')
-    jobs = [(b, params) for b in bags]
-    if args.jobs > 1:
-        import multiprocessing
-
-        with multiprocessing.get_context('spawn').Pool(args.jobs) as pool:
-            per_bag = pool.map(_job, jobs)
-    else:
-        per_bag = [_job(j) for j in jobs]
+    per_bag = run_per_bag(check_bag, bags, params, args.jobs)
 
     def mean(key: str, rows: list[dict[str, Any]]) -> float | None:
         vals = [r[key] for r in rows if r[key] is not None]
