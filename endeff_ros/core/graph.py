@@ -206,7 +206,7 @@ def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
     is no part: a chair seat's rim seen edge-on in the unit tests), and it is a local maximum
     of the geodesic distance to the root (Eq. 6), as the paper defines an end-effector. The
     band expansion lays a band every δ_L or less along a limb, so a real protrusion of
-    0.25-0.3 m crosses 3 or more sub-bands; most near-g extremes that are no end-effectors
+    0.2-0.3 m crosses about 3 or more sub-bands; most near-g extremes that are no end-effectors
     are the far side of one or two long edges (a large sub-band sliced on a broad surface, a
     joining link: median edge 0.13 m against 0.09 m for true ones) or a point between two
     found paths that is no farther from the root than a neighbour. The farthest chain end is
