@@ -229,8 +229,8 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
                                                                  str(path))
         if res.attribute_warning:
             (log or _stderr)(f'warning: {res.attribute_warning}')
-        res.person = _is_person_sequence(res.name, res.attributes)
-        gt_ids = _gt_ids(bag)
+        res.person = is_person_sequence(res.name, res.attributes)
+        ids_by_stamp = gt_ids(bag)
         tracker = tracker_factory(params)
         it = bag.frames()
         while True:
@@ -259,8 +259,8 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
             res.seconds['temporal'] += t2 - t1
             res.seconds['single_frame'] += t3 - t2
             kinds = None
-            if gt is not None and frame.stamp_ns in gt_ids:
-                ids = gt_ids[frame.stamp_ns]
+            if gt is not None and frame.stamp_ns in ids_by_stamp:
+                ids = ids_by_stamp[frame.stamp_ns]
                 kinds = kinds_of_ids(ids, person=res.person) if len(ids) == len(gt) else None
             if progress is not None:
                 progress(1)
@@ -280,7 +280,7 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
     return res
 
 
-def _is_person_sequence(name: str, attributes: dict[str, Any]) -> bool:
+def is_person_sequence(name: str, attributes: dict[str, Any]) -> bool:
     """People in view: the attribute ``people`` > 0, else a sequence of people of the paper
     suite (its person sequences, and ``two_people`` of the generic group, whose second person's
     ids are the first's + 5)."""
@@ -294,7 +294,7 @@ def _is_person_sequence(name: str, attributes: dict[str, Any]) -> bool:
     return name.rsplit('/', 1)[-1] in (*PERSON_SEQUENCES, 'two_people')
 
 
-def _gt_ids(bag: BagReader) -> dict[int, npt.NDArray[np.int64]]:
+def gt_ids(bag: BagReader) -> dict[int, npt.NDArray[np.int64]]:
     """Ground-truth ids per header stamp (ns), aligned with the positions the reader yields
     (rows with non-finite positions dropped); ``{}`` when the cloud has no ``id`` field."""
     from endeff_ros.ros import convert

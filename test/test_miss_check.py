@@ -34,6 +34,29 @@ def test_every_point_gets_one_class(room_bag):
     assert sum(r['ground_truth'].values()) == points
     assert r['ground_truth']['found'] > 0
     assert r['reported']['tp'] > 0
+    # The same points per kind: a person's head, hands and feet, from the ground-truth ids.
+    kinds = r['ground_truth_by_kind']
+    assert set(kinds) == {'head', 'hand', 'foot'}
+    for cls in miss_check.GT_CLASSES:
+        assert sum(k[cls] for k in kinds.values()) == r['ground_truth'][cls]
+
+
+def test_an_end_moved_off_its_part_is_a_near_miss(room_bag, monkeypatch):
+    """Every reported end shifted 0.2 m sideways: what was found becomes a near miss."""
+    bag, _ = room_bag
+    found = miss_check.check_bag(bag)['ground_truth']['found']
+    update = miss_check.Tracker.update
+
+    def shifted(self, frame, *args, **kwargs):
+        result = update(self, frame, *args, **kwargs)
+        for t in result.tracks:
+            t.position[0] += 0.2
+        return result
+
+    monkeypatch.setattr(miss_check.Tracker, 'update', shifted)
+    r = miss_check.check_bag(bag)['ground_truth']
+    assert r['found'] < found / 4
+    assert r['near_miss'] > found / 2
 
 
 def test_a_box_that_holds_nothing_puts_every_point_outside_it(room_bag):
