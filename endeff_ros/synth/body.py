@@ -261,19 +261,29 @@ def star(phase: float, spin: float, color: Color = (0.85, 0.55, 0.15), tex: int 
         e2 = e1 + 0.5 * np.sin(w + 2.1 * k + 2.0)
         d1 = np.array([np.cos(a1) * np.cos(e1), np.sin(a1) * np.cos(e1), np.sin(e1)])
         d2 = np.array([np.cos(a2) * np.cos(e2), np.sin(a2) * np.cos(e2), np.sin(e2)])
-        j0 = hub + 0.10 * d1
-        j1 = j0 + 0.22 * d1
-        j2 = j1 + 0.20 * d2
-        cap = j2 + 0.03 * d2
-        ccol = (color[0] * 0.6, color[1] * 0.9, min(1.0, color[2] + 0.5))
-        prims.append(capsule(j0, j1, 0.055, [0, 0, 1], color, tex + 1 + k, f'limb{k}_a'))
-        prims.append(capsule(j1, j2, 0.045, [0, 0, 1], color, tex + 6 + k, f'limb{k}_b'))
-        gp.append(len(prims))
-        prims.append(ellipsoid(cap, frame_from_axis(d2, [0, 0, 1]), [0.065] * 3, ccol,
-                               tex + 11 + k, f'limb{k}_cap'))
+        limb, cap = star_limb(hub, d1, d2, k, color, tex)
+        gp.append(len(prims) + 2)
+        prims.extend(limb)
         gt.append(cap)
     return Entity(prims, np.array(gt), np.arange(5, dtype=np.uint32), np.array(gp),
                   np.full(5, 0.065))
+
+
+def star_limb(hub: Vec, d1: Vec, d2: Vec, k: int, color: Color, tex: int,
+              outer: float = 0.20) -> tuple[list[Primitive], Vec]:
+    """Limb ``k`` of a star with its hub centre at ``hub``: a segment of radius 0.055 from
+    0.10 m out along ``d1`` for 0.22 m, one of radius 0.045 on along ``d2`` for ``outer`` m,
+    and an end cap sphere of radius 0.065 0.03 m further, whose centre is the end-effector.
+    Returns the three primitives (the cap last) and the cap's centre."""
+    j0 = hub + 0.10 * d1
+    j1 = j0 + 0.22 * d1
+    j2 = j1 + outer * d2
+    cap = j2 + 0.03 * d2
+    ccol = (color[0] * 0.6, color[1] * 0.9, min(1.0, color[2] + 0.5))
+    return [capsule(j0, j1, 0.055, [0, 0, 1], color, tex + 1 + k, f'limb{k}_a'),
+            capsule(j1, j2, 0.045, [0, 0, 1], color, tex + 6 + k, f'limb{k}_b'),
+            ellipsoid(cap, frame_from_axis(d2, [0, 0, 1]), [0.065] * 3, ccol, tex + 11 + k,
+                      f'limb{k}_cap')], cap
 
 
 def chair(color: Color = (0.55, 0.33, 0.18), tex: int = 60) -> Entity:

@@ -21,9 +21,9 @@ import numpy as np
 import numpy.typing as npt
 
 from ..core.types import KINECT_640, RGBDFrame
-from .body import Entity, PersonModel, PersonPose, Placement, chair, robot_arm
+from .body import Entity, PersonModel, PersonPose, Placement, chair, robot_arm, star_limb
 from .render import NOTHING, Background, Camera, Rendered, background, render
-from .shapes import Primitive, Vec, capsule, ellipsoid, frame_from_axis, rot_x
+from .shapes import Primitive, Vec, ellipsoid, rot_x
 
 #: A level camera 1.1 m above the floor (optical axis horizontal): the floor plane is then
 #: y = 1.1 in the optical frame and its normal (0, -1, 0).
@@ -105,11 +105,10 @@ def star(n_limbs: int = 5, *, z: float = -2.5, keep: tuple[int, ...] | None = No
          height: float = 1.2, spin: float = 0.3, length: float = 0.55) -> Entity:
     """A flat star facing the camera: a hub (ellipsoid 0.14 x 0.14 x 0.10 m) ``height`` m up
     with ``n_limbs`` straight limbs in the image plane, limb i at ``spin + 2 pi i / n_limbs``
-    rad from the camera's right (counter-clockwise as seen). A limb is built as those of
-    ``body.star`` (``length`` 0.55): a segment of radius 0.055 from 0.10 to 0.32 m out, one of
-    radius 0.045 on to the end cap, a sphere of radius 0.065 ``length`` m from the hub centre
-    whose centre is the end-effector (id i). Only the limbs in ``keep`` are built (all by
-    default)."""
+    rad from the camera's right (counter-clockwise as seen). A limb is built by
+    ``body.star_limb``, straight: segments from 0.10 m out, a sphere of radius 0.065 ``length``
+    m from the hub centre whose centre is the end-effector (id i; ``length`` 0.55 is
+    ``body.star``'s reach). Only the limbs in ``keep`` are built (all by default)."""
     hub = np.array([0.0, height, z])
     color, tex = (0.85, 0.55, 0.15), 40
     prims = [ellipsoid(hub, rot_x(0.0), [0.14, 0.14, 0.10], color, tex, 'hub')]
@@ -119,14 +118,9 @@ def star(n_limbs: int = 5, *, z: float = -2.5, keep: tuple[int, ...] | None = No
             continue
         a = spin + 2 * np.pi * k / n_limbs
         d = np.array([np.cos(a), np.sin(a), 0.0])
-        j0, j1 = hub + 0.10 * d, hub + 0.32 * d
-        cap = hub + length * d
-        prims.append(capsule(j0, j1, 0.055, [0, 0, 1], color, tex + 1 + k, f'limb{k}_a'))
-        prims.append(capsule(j1, cap - 0.03 * d, 0.045, [0, 0, 1], color, tex + 6 + k,
-                             f'limb{k}_b'))
-        gp.append(len(prims))
-        prims.append(ellipsoid(cap, frame_from_axis(d, [0, 0, 1]), [0.065] * 3, color,
-                               tex + 11 + k, f'limb{k}_cap'))
+        limb, cap = star_limb(hub, d, d, k, color, tex, outer=length - 0.35)
+        gp.append(len(prims) + 2)
+        prims.extend(limb)
         gt.append(cap)
         ids.append(k)
     return Entity(prims, np.array(gt).reshape(-1, 3), np.array(ids, np.uint32),
