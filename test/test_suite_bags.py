@@ -16,21 +16,13 @@ from endeff_ros.bag.reader import read_frames
 from endeff_ros.synth import cli as synth_cli
 from endeff_ros.synth.proc_clips import sit_clip, walk_clip, wave_clip
 from endeff_ros.synth.sensors import SENSORS
-from endeff_ros.synth.mocap.clip import JOINT_INDEX
-from endeff_ros.synth.skeleton_body import scale_to_height
 from endeff_ros.synth.suite import (
     DETAILS_KEY,
     QUICK_FRAMES,
-    SWAY_M,
     BagRenderer,
-    area_pieces,
-    draw_spec,
-    fit_activity_area,
-    resampled,
     suite_specs,
     write_bag,
 )
-from endeff_ros.synth.views import AREA_HALF_WIDTH_M, FARTHEST_M, NEAREST_M, View, place
 
 KEYS = {'source', 'family', 'split', 'view', 'camera_height_m', 'distance_m', 'sensor', 'room',
         'people', 'truncated'}
@@ -222,72 +214,3 @@ def test_bad_spec_is_a_clear_error():
         BagSpec('x', (person,), 5, 'garden', 'none', 'd435', 1)
     with pytest.raises(KeyError, match='proc_wave'):
         BagRenderer(BagSpec('x', (person,), 5, 'empty', 'none', 'd435', 1), {})
-
-
-def _first_pelvis(spec, clip):
-    """Placed pelvis (T, 3) of the first person of ``spec`` as the renderer places it."""
-    p = spec.people[0]
-    full = scale_to_height(resampled(clip), p.body.height_m)
-    seg = full[p.start:p.start + spec.frames]
-    seg = np.concatenate([seg, np.repeat(seg[-1:], spec.frames - len(seg), 0)])
-    return place(seg, p.view)[0][:, JOINT_INDEX['pelvis']]
-
-
-def _spec_for(clip, view, frames):
-    rng = np.random.default_rng(0)
-    base = draw_spec(1, clip, [clip], {clip.name: resampled(clip)}, frames, 1, rng, False)
-    return dataclasses.replace(base, frames=frames, people=(
-        dataclasses.replace(base.people[0], start=0, view=view),))
-
-
-def _inside(pelvis):
-    depth = -pelvis[:, 2]
-    return ((np.abs(pelvis[:, 0]) <= AREA_HALF_WIDTH_M + 1e-6)
-            & (depth >= NEAREST_M - 1e-6) & (depth <= FARTHEST_M + 1e-6))
-
-
-@pytest.mark.parametrize('kind', ['front', 'back', 'across'])
-def test_a_long_walk_becomes_pieces_inside_the_activity_area(kind):
-    # 6 s at 1.3 m/s: 7.8 m of travel, which neither the area's 3 m of depth nor its 2.5 m of
-    # width holds. Before the fit, part of the walk lies outside the area.
-    clip = walk_clip(180, name='long_walk')
-    spec = _spec_for(clip, View(kind, 2.5, 1.2), 180)
-    assert not _inside(_first_pelvis(spec, clip)).all()
-    pieces = area_pieces(spec, resampled(clip))
-    assert len(pieces) >= 2
-    spans = sorted((p.people[0].start, p.people[0].start + p.frames) for p in pieces)
-    for (_, end), (start, _) in zip(spans, spans[1:]):
-        assert start >= end  # the pieces do not overlap
-    assert all(a >= 0 and b <= 180 for a, b in spans)
-    for piece in pieces:
-        assert piece.frames >= 30
-        assert _inside(_first_pelvis(piece, clip)).all(), (kind, piece.people[0].start)
-    # The pieces keep most of the walk (only rests shorter than a second are left out).
-    assert sum(p.frames for p in pieces) >= 180 - 2 * 30
-
-
-def test_a_border_cut_view_of_a_wide_sensor_is_brought_into_the_area():
-    clip = wave_clip(60)
-    spec = _spec_for(clip, View('front', 3.3, 1.2, offset_x_m=2.5), 60)
-    fitted = fit_activity_area(spec, resampled(clip))
-    view = fitted.people[0].view
-    assert view.offset_x_m == pytest.approx(AREA_HALF_WIDTH_M - SWAY_M)
-    # Nearer in proportion, so that the person is still cut at the image border.
-    assert view.distance_m == pytest.approx(3.3 * (AREA_HALF_WIDTH_M - SWAY_M) / 2.5, abs=0.01)
-    assert fitted.attributes['distance_m'] == view.distance_m
-    assert _inside(_first_pelvis(fitted, clip)).all()
-
-
-def test_a_person_inside_the_area_is_left_as_drawn():
-    clip = wave_clip(60)
-    spec = _spec_for(clip, View('side', 2.5, 1.2), 60)
-    assert fit_activity_area(spec, resampled(clip)) == spec
-    assert area_pieces(spec, resampled(clip)) == [spec]
-
-
-def test_full_suite_bags_keep_the_first_person_in_the_area(clips):
-    by_name = {c.name: c for c in clips}
-    specs = suite_specs(clips)
-    assert len({s.name for s in specs}) == len(specs)
-    for s in specs:
-        assert _inside(_first_pelvis(s, by_name[s.people[0].clip])).mean() >= 0.9, s.name

@@ -44,12 +44,12 @@ from .room import BUILDERS, ROOMS, background_entity, scatter, sight_lines
 from .sensor import color_image, depth_to_mm
 from .sensors import SENSORS, sensor_depth
 from .skeleton_body import BodyStyle, build_body, carry_pose, scale_to_height, standing_height
-from .views import AREA_HALF_WIDTH_M, FARTHEST_M, NEAREST_M, View, aim_camera, effective_kind, place
+from .views import FARTHEST_M, NEAREST_M, View, aim_camera, effective_kind, place
 
 FPS = 30.0
 QUICK_FRAMES = 24
 QUICK_BAGS = 48
-FULL_MAX_S = 6.0  # full suite: each clip up to this long (its most active segment)
+FULL_MAX_S = 5.0  # full suite: each clip up to this long (its most active segment)
 DETAILS_KEY = 'endeff.details'
 INTERACTIONS = ('none', 'occluder', 'sit', 'table', 'carry')
 # How a furnished room is laid out: ``scatter`` anywhere off the people's paths (the mocap
@@ -208,7 +208,6 @@ def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
     else:
         count = len(order) + len(order) // 8
     specs = []
-    extra: list[tuple[MotionClip, BagSpec]] = []
     for i in range(count):
         rng = np.random.default_rng([seed, 7, i])
         clip = order[i % len(order)]
@@ -216,110 +215,8 @@ def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
         people = _PEOPLE[i % len(_PEOPLE)] if (quick or i >= len(order)) else 1
         if not quick and i >= len(order):
             people = 2 + i % 2
-        spec = draw_spec(i, clip, order, pos, n, people, rng, quick)
-        if quick:
-            specs.append(spec)
-            continue
-        first, *rest = area_pieces(spec, pos[clip.name])
-        specs.append(first)
-        extra += [(clip, piece) for piece in rest]
-    # The rest of a segment that the activity area cut: further bags after all the others
-    # (their own index in the name; the bags before keep theirs).
-    for k, (clip, piece) in enumerate(extra):
-        name = re.sub(r'__\d{3,}-', f'__{count + k:03d}-', piece.name, count=1)
-        specs.append(dataclasses.replace(piece, name=name))
+        specs.append(draw_spec(i, clip, order, pos, n, people, rng, quick))
     return specs
-
-
-def area_pieces(spec: BagSpec, pos: npt.NDArray[np.float64]) -> list[BagSpec]:
-    """``spec`` as one or more bags that each keep the first person in the activity area
-    (:func:`fit_activity_area`): the kept window first, then the windows of at least one
-    second that the cut left before or after it, each placed anew (the same person, view,
-    room and sensor), so that the suite keeps the segment's motion."""
-    pieces = []
-    queue = [(0, spec.frames)]
-    while queue:
-        a, n = queue.pop(0)
-        part = dataclasses.replace(spec, frames=n, people=tuple(
-            dataclasses.replace(p, start=p.start + a) for p in spec.people))
-        fitted = fit_activity_area(part, pos)
-        pieces.append(fitted)
-        cut = fitted.people[0].start - part.people[0].start
-        queue += [(lo, hi - lo) for lo, hi in ((a, a + cut), (a + cut + fitted.frames, a + n))
-                  if hi - lo >= round(FPS)]
-    return pieces
-
-
-#: How far the pelvis of a person standing at a place sways sideways in a segment (m): a
-#: view cut at the border puts the mean pelvis this far inside the activity area.
-SWAY_M = 0.25
-
-
-def _pelvis_inside(placed: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
-    """Per frame of placed joints (T, 22, 3): the pelvis lies in the activity area."""
-    pel = placed[:, _J['pelvis']]
-    depth = -pel[:, 2]
-    return ((np.abs(pel[:, 0]) <= AREA_HALF_WIDTH_M + 1e-6) & (depth >= NEAREST_M - 1e-6)
-            & (depth <= FARTHEST_M + 1e-6))
-
-
-def fit_activity_area(spec: BagSpec, pos: npt.NDArray[np.float64]) -> BagSpec:
-    """``spec`` with its first person kept in the activity area in every frame (pelvis
-    ``NEAREST_M``-``FARTHEST_M`` deep and within ``AREA_HALF_WIDTH_M`` of the optical axis:
-    the default foreground box with room for the arms), ``pos`` that person's clip at 30 fps.
-
-    A view cut at the image border moves the person sideways by a fraction of the image's
-    half-width at its distance; with a wide sensor (D455, Azure) that is beyond the box, so
-    such a person is brought nearer until the offset fits, ``SWAY_M`` inside the area. A segment that travels farther
-    than the area holds (a 5 s walk seen from the front covers 6 m; a walk across at 3.5 m
-    leaves the box's sides) is cut to its longest window that ``place`` can put inside the
-    area, at least one second (the most frames inside, if none that long fits). Unchanged
-    when the person already stays inside.
-    """
-    first = spec.people[0]
-    view = first.view
-    widest = AREA_HALF_WIDTH_M - SWAY_M
-    if abs(view.offset_x_m) > widest:
-        scale = widest / abs(view.offset_x_m)
-        dist = round(max(NEAREST_M + 0.2, view.distance_m * scale), 2)
-        off = float(np.copysign(widest, view.offset_x_m))
-        shift = off - view.offset_x_m
-        view = dataclasses.replace(view, distance_m=dist, offset_x_m=round(off, 2))
-        people = [dataclasses.replace(first, view=view)] + [
-            dataclasses.replace(p, view=dataclasses.replace(
-                p.view, offset_x_m=round(p.view.offset_x_m + shift, 2)))
-            for p in spec.people[1:]]
-        attrs = {**spec.attributes, 'distance_m': dist}
-        spec = dataclasses.replace(spec, people=tuple(people), attributes=attrs)
-        first = spec.people[0]
-    full = scale_to_height(pos, first.body.height_m)
-
-    def segment(a: int, n: int) -> npt.NDArray[np.float64]:
-        seg = full[first.start + a:first.start + a + n]
-        if len(seg) < n:  # a short clip holds its last pose, as the renderer does
-            seg = np.concatenate([seg, np.repeat(seg[-1:], n - len(seg), 0)])
-        return seg
-
-    n = spec.frames
-    if _pelvis_inside(place(segment(0, n), first.view)[0]).all():
-        return spec
-    step = 3
-    shortest = min(n, round(FPS))
-    best = None
-    for length in range(n - step, shortest - 1, -step):
-        for a in range(0, n - length + 1, step):
-            if _pelvis_inside(place(segment(a, length), first.view)[0]).all():
-                best = (a, length)
-                break
-        if best:
-            break
-    if best is None:
-        scores = [(int(_pelvis_inside(place(segment(a, shortest), first.view)[0]).sum()), -a)
-                  for a in range(0, n - shortest + 1, step)]
-        best = (-max(scores)[1], shortest)
-    a, length = best
-    people = [dataclasses.replace(p, start=p.start + a) for p in spec.people]
-    return dataclasses.replace(spec, people=tuple(people), frames=length)
 
 
 def draw_spec(i: int, clip: MotionClip, order: list[MotionClip], pos: dict, n: int,

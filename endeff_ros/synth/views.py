@@ -33,9 +33,6 @@ NEAREST_M = 1.0  # an approaching walk stops this far (horizontally) from the ca
 # FARTHEST_M (horizontal pelvis distance) throughout a segment, so that the default box (depth
 # up to 4.3 m) holds them with their limbs; a person beyond it is outside the area by design.
 FARTHEST_M = 4.0
-# ... and within this distance of the optical axis sideways: the default box's 1.6 m less
-# room for an arm held out to the side.
-AREA_HALF_WIDTH_M = 1.25
 _J = JOINT_INDEX
 
 
