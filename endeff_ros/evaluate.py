@@ -97,13 +97,16 @@ def _background_estimate() -> EstimateFn:
     the tracker has), so both estimators see the same foreground."""
     from endeff_ros.core.background import BackgroundModel
     from endeff_ros.core.params import EndeffParams
-    from endeff_ros.core.single_frame import estimate_frame
+    from endeff_ros.core.single_frame import estimate_frame, only_evident
 
     model = BackgroundModel()
 
     def estimate(frame: RGBDFrame, params: EndeffParams | None) -> Any:
         params = params or EndeffParams()
-        return estimate_frame(frame, params, background=model if params.background else None)
+        if not params.background:
+            return estimate_frame(frame, params)
+        found = estimate_frame(frame, params, background=model)
+        return only_evident(found, model, frame.intrinsics, params)
 
     return estimate
 
