@@ -97,16 +97,13 @@ def _background_estimate() -> EstimateFn:
     the tracker has), so both estimators see the same foreground."""
     from endeff_ros.core.background import BackgroundModel
     from endeff_ros.core.params import EndeffParams
-    from endeff_ros.core.single_frame import estimate_frame, only_evident
+    from endeff_ros.core.single_frame import estimate_frame
 
     model = BackgroundModel()
 
     def estimate(frame: RGBDFrame, params: EndeffParams | None) -> Any:
         params = params or EndeffParams()
-        if not params.background:
-            return estimate_frame(frame, params)
-        found = estimate_frame(frame, params, background=model)
-        return only_evident(found, model, frame.intrinsics, params)
+        return estimate_frame(frame, params, background=model if params.background else None)
 
     return estimate
 

@@ -153,17 +153,6 @@ def far_side_pixels(depth: npt.NDArray[np.float32], stride: int) -> npt.NDArray[
     return far
 
 
-def _pixels(points: npt.NDArray[np.float64], intrinsics: Intrinsics, stride: int,
-            ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.int64]]:
-    """Which of ``points`` (N, 3) project (in front of the camera), and their pixels (u, v)
-    in the image strided by ``stride``."""
-    with np.errstate(divide='ignore', invalid='ignore'):
-        u = np.round((intrinsics.fx * points[:, 0] / points[:, 2] + intrinsics.cx) / stride)
-        v = np.round((intrinsics.fy * points[:, 1] / points[:, 2] + intrinsics.cy) / stride)
-    ok = (points[:, 2] > 1e-6) & np.isfinite(u) & np.isfinite(v)
-    return ok, np.stack([u[ok], v[ok]], axis=1).astype(np.int64)
-
-
 def _windows(image: npt.NDArray, uv: npt.NDArray[np.int64]) -> npt.NDArray:
     """(N, (2r + 1)^2) values of ``image`` around N pixels (u, v), r = PROTECT_RADIUS_PX,
     clipped at the border."""
@@ -194,7 +183,6 @@ class BackgroundModel:
         self._carried: set[int] = set()  # those of them alive when the camera moved
         self._carried_uv = np.zeros((0, 2), np.int64)  # their pixels in the last frame
         self._labels: npt.NDArray[np.int32] | None = None
-        self._evident: npt.NDArray[np.bool_] | None = None  # per label while learning
         self._learn_until = 0.0
         self._last_raw: float | None = None
         self._offset = 0.0
@@ -243,7 +231,6 @@ class BackgroundModel:
         self._out = np.zeros(shape, bool)
         self._learn_until = t + params.background_learn_s
         self._settling = False
-        self._evident = np.zeros(1, bool)  # nothing has shown motion yet
 
     def foreground(self, depth: npt.NDArray[np.floating], candidate: npt.NDArray[np.bool_],
                    stamp_ns: int, params: EndeffParams, *,
@@ -326,6 +313,8 @@ class BackgroundModel:
         far_side = far_side_pixels(d, stride)
         labels, edge = depth_components(d, upper, stride, far_side)
         self._labels = labels
+        if t < self._learn_until:
+            return candidate.copy()
         changed = cv2.morphologyEx(((nearer & ~absorb) | (fresh & ~adopt)).view(np.uint8),
                                    cv2.MORPH_OPEN,
                                    np.ones((3, 3), np.uint8)).view(bool)
@@ -335,10 +324,6 @@ class BackgroundModel:
         need = np.maximum(MIN_CHANGED_PX / stride ** 2, MIN_CHANGED_FRACTION * total)
         moving = hits >= need
         moving[0] = False
-        if t < self._learn_until:
-            self._evident = moving
-            return candidate.copy()
-        self._evident = None
         # Held: pixels kept because of changed pixels within HOLD_S, at the same depth (the
         # same surface, not the wall an arm swept over).
         recent = (t - self._kept_t <= HOLD_S) & (np.abs(d - self._kept_z) <= margin)
@@ -392,24 +377,6 @@ class BackgroundModel:
         return np.array([np.bincount(row[row > 0]).argmax() if (row > 0).any() else 0
                          for row in windows], dtype=np.int32)  # a loop over tracks only
 
-    def evident(self, positions: npt.NDArray[np.float64], intrinsics: Intrinsics,
-                stride: int) -> npt.NDArray[np.bool_]:
-        """Per position (N, 3), metres, optical frame: whether it may be reported. While the
-        background is learnt everything is kept, furniture included, and its ends would be
-        reported (in the furnished rooms, 7.8 false positives per frame in the learning
-        frames against 1.2 in the same empty rooms): so only what lies on a component that
-        has already shown changed pixels is reported then; a still person is not, as after
-        the learning. After the learning: all (the foreground holds only such components).
-        ``stride``: the pixel stride the last frame was labelled at."""
-        pts = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-        if self._evident is None or self._labels is None:
-            return np.ones(len(pts), bool)
-        ok, uv = _pixels(pts, intrinsics, stride)
-        hit = self._track_labels(self._labels, uv)
-        shown = np.zeros(len(pts), bool)
-        shown[ok] = (hit > 0) & self._evident[np.minimum(hit, len(self._evident) - 1)]
-        return shown
-
     def protect(self, positions: npt.NDArray[np.float64], ids: list[int],
                 intrinsics: Intrinsics, stride: int) -> None:
         """Tell the model where the tracks are: ``positions`` (N, 3) metres, optical frame,
@@ -425,8 +392,13 @@ class BackgroundModel:
         if labels is None or self._bg is None:
             return
         pts = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-        ok, uv = _pixels(pts, intrinsics, stride)
-        track_ids = np.asarray(ids, dtype=np.int64).reshape(-1)[ok]
+        track_ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            u = np.round((intrinsics.fx * pts[:, 0] / pts[:, 2] + intrinsics.cx) / stride)
+            v = np.round((intrinsics.fy * pts[:, 1] / pts[:, 2] + intrinsics.cy) / stride)
+        ok = (pts[:, 2] > 1e-6) & np.isfinite(u) & np.isfinite(v)
+        uv = np.stack([u[ok], v[ok]], axis=1).astype(np.int64)
+        track_ids = track_ids[ok]
         hit = self._track_labels(labels, uv)
         if hit.any():
             self._near_since[np.isin(labels, hit[hit > 0])] = self._t

@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
-from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -114,26 +113,8 @@ def drop_cut_ends(estimate: FrameEstimate, intrinsics: Intrinsics,
     cut = cut_nodes(estimate.points, estimate.subband, intrinsics, params)
     if not cut.size or not any(e.candidates for e in estimate.entities):
         return estimate
-    return _keep_candidates(estimate, lambda c: not np.isin(c.node, cut))
-
-
-def only_evident(estimate: FrameEstimate, background: BackgroundModel, intrinsics: Intrinsics,
-                 params: EndeffParams) -> FrameEstimate:
-    """``estimate`` without the candidates that ``background`` would not report yet
-    (:meth:`~endeff_ros.core.background.BackgroundModel.evident`: while it learns, only what
-    moved), as the tracker publishes its tracks."""
-    found = [c for e in estimate.entities for c in e.candidates]
-    if not found:
-        return estimate
-    shown = background.evident(np.array([c.position for c in found]), intrinsics,
-                               params.pixel_stride)
-    keep = {id(c) for c, ok in zip(found, shown) if ok}
-    return _keep_candidates(estimate, lambda c: id(c) in keep)
-
-
-def _keep_candidates(estimate: FrameEstimate, keep: Callable[[Candidate], bool],
-                     ) -> FrameEstimate:
-    entities = [dataclasses.replace(e, candidates=[c for c in e.candidates if keep(c)])
+    entities = [dataclasses.replace(e, candidates=[c for c in e.candidates
+                                                   if not np.isin(c.node, cut)])
                 for e in estimate.entities]
     return dataclasses.replace(estimate, entities=entities)
 

@@ -180,10 +180,6 @@ class Tracker:
             self.background.protect(self._anchors(), [t.id for t in self._tracks],
                                     frame.intrinsics, self.params.pixel_stride)
         tracks = [self._publish(t) for t in self._tracks]
-        if self.params.background and tracks:  # the learning frames report only what moved
-            shown = self.background.evident(self._anchors(), frame.intrinsics,
-                                            self.params.pixel_stride)
-            tracks = [t for t, ok in zip(tracks, shown) if ok]
         return TrackerResult(frame.stamp_ns, frame.frame_id, tracks, estimate, stages)
 
     # -- predict (Section 5.1) ---------------------------------------------------------------
