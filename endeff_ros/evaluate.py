@@ -49,7 +49,9 @@ from endeff_ros.bag.reader import (
     options_from_args,
 )
 from endeff_ros.cli_common import load_params_option
+from endeff_ros.core.cloud import box_mask
 from endeff_ros.core.errors import InputError
+from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.types import Track
 from endeff_ros.scoring import (
     KINDS,
@@ -67,7 +69,6 @@ if TYPE_CHECKING:
 
     import numpy.typing as npt
 
-    from endeff_ros.core.params import EndeffParams
     from endeff_ros.core.types import RGBDFrame
     from endeff_ros.scoring import FrameScore, KindScore
 
@@ -96,7 +97,6 @@ def _background_estimate() -> EstimateFn:
     """The default single-frame estimator with its own static background (one per bag, as
     the tracker has), so both estimators see the same foreground."""
     from endeff_ros.core.background import BackgroundModel
-    from endeff_ros.core.params import EndeffParams
     from endeff_ros.core.single_frame import estimate_frame
 
     model = BackgroundModel()
@@ -149,6 +149,10 @@ class SequenceResult:
     attribute_warning: str | None = None
     #: Whether the ground-truth ids are a person's (kinds head/hand/foot) or kind ``other``.
     person: bool = False
+    #: Ground-truth points of the scored frames, and those inside the foreground box (Section
+    #: 3): a label outside it cannot be found, whatever the estimators do.
+    gt_points: int = 0
+    gt_in_box: int = 0
 
     @property
     def frames(self) -> int:
@@ -183,6 +187,7 @@ class SequenceResult:
                         for m in METHODS}
         out['counts'] = {m: summary_dict(self.scorers[m]) for m in METHODS}
         out['counts']['temporal']['predicted_false_positives'] = self.predicted_false_positives
+        out['labels_in_box'] = _in_box_json(self.gt_points, self.gt_in_box)
         out['estimator_input_errors'] = dict(self.input_errors)
         out['seconds'] = {k: round(v, 4) for k, v in self.seconds.items()}
         out['read_stats'] = self.stats
@@ -192,6 +197,11 @@ class SequenceResult:
                             **{f'{m}_false_positives': list(self.false_positives[m])
                                for m in METHODS}}
         return out
+
+
+def _in_box_json(points: int, inside: int) -> dict[str, Any]:
+    return {'points': points, 'inside': inside,
+            'fraction': round(inside / points, 4) if points else None}
 
 
 def _jf(value: float) -> float | None:
@@ -213,6 +223,7 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
     """
     estimate_fn = estimate_fn or _background_estimate()
     tracker_factory = tracker_factory or _default_tracker
+    box_params = params or EndeffParams()
     path = Path(path)
     res = SequenceResult(name=name or bag_name(path), path=str(path),
                          scorers={m: SequenceScorer() for m in METHODS},
@@ -273,6 +284,9 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
                         res.predicted_false_positives += _predicted_unmatched(tracks, score)
             if gt is not None:
                 res.stamps_ns.append(frame.stamp_ns)
+                labels = np.asarray(gt, dtype=np.float64).reshape(-1, 3)
+                res.gt_points += len(labels)
+                res.gt_in_box += int(np.count_nonzero(box_mask(labels, box_params)))
         res.stats = bag.stats.to_dict()
     if res.frames == 0:
         raise BagError(path, 'no synchronised frames (colour, depth and camera info never '
@@ -357,6 +371,8 @@ def build_report(results: Sequence[SequenceResult], failed: Sequence[tuple[str, 
     report['overall'] = {m: mean_over_sequences([r.score(m) for r in results]).to_json()
                          for m in METHODS}
     report['kinds'] = _group_entry(results, None)['kinds']
+    report['labels_in_box'] = _in_box_json(sum(r.gt_points for r in results),
+                                           sum(r.gt_in_box for r in results))
     groups = {}
     for gname, members in _groups().items():
         inside = [r for r in results if r.name.rsplit('/', 1)[-1] in members]
@@ -419,6 +435,11 @@ def format_table(report: dict[str, Any]) -> str:
     o = report['overall']
     lines.append(f'{"overall":{width}}{pad}{"":>7}{len(seqs):>7} | '
                  f'{cols(o["temporal"])} | {cols(o["single_frame"])}')
+    inside = report.get('labels_in_box', {})
+    if inside.get('points'):
+        lines.append(f'ground-truth points inside the foreground box: {inside["inside"]} of '
+                     f'{inside["points"]} ({100 * inside["fraction"]:.1f} %); no estimator finds '
+                     'one outside it')
     kinds = _kind_table(report, width)
     if kinds:
         lines += ['', *kinds]

@@ -352,3 +352,20 @@ def test_plots_without_matplotlib_are_reported(tmp_path: Path, monkeypatch: pyte
     monkeypatch.setitem(sys.modules, 'matplotlib', None)  # import matplotlib -> ImportError
     assert cli_main(['eval', str(tmp_path / 'seq'), '--plots', str(tmp_path / 'plots')]) == 0
     assert 'no plots' in capsys.readouterr().err
+
+
+def test_labels_inside_the_box_are_counted(tmp_path: Path) -> None:
+    """The report says how many ground-truth points lie inside the foreground box: blob 2
+    (x 0.35-0.65 m) lies beyond a box ending at x = 0.2 m, blobs 0 and 1 (x <= 0.15) inside."""
+    from endeff_ros.core.params import EndeffParams
+
+    write_bag(tmp_path / 'a', BagSpec(frames=6, gt_frames={0, 2, 3, 5}))
+    default, _ = evaluate_bags([tmp_path / 'a'], estimate_fn=_lagging_estimate,
+                               tracker_factory=FakeTracker)
+    assert default['labels_in_box'] == {'points': 12, 'inside': 12, 'fraction': 1.0}
+    narrow, _ = evaluate_bags([tmp_path / 'a'], params=EndeffParams(box_max_x=0.2),
+                              estimate_fn=_lagging_estimate, tracker_factory=FakeTracker)
+    assert narrow['sequences'][0]['labels_in_box'] == {'points': 12, 'inside': 8,
+                                                       'fraction': 0.6667}
+    assert narrow['labels_in_box']['inside'] == 8
+    assert '8 of 12 (66.7 %)' in format_table(narrow)
