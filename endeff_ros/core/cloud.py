@@ -266,6 +266,8 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
         if floor is not None:
             height = floor.heights(x, y, z)
             keep &= height > params.floor_distance
+    if params.wall_min_area > 0:
+        keep &= ~wall_points(x, y, z, keep, valid, intrinsics, params)
     if background is not None:
         # The model sees every reading of the strided image (walls beyond the box included:
         # a person in front of them changed those pixels), and the box and floor as a mask.
@@ -281,6 +283,85 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
     if params.voxel_size <= 0 or len(z) == 0:
         return np.stack([x, y, z], axis=1), floor
     return _voxel_means((x, y, z), params.voxel_size), floor
+
+
+def wall_points(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
+                z: npt.NDArray[np.float64], keep: npt.NDArray[np.bool_],
+                valid: npt.NDArray[np.bool_], intrinsics: Intrinsics,
+                params: EndeffParams) -> npt.NDArray[np.bool_]:
+    """Points of ``keep`` on planes (any orientation) that show at least
+    ``params.wall_min_area`` square metres: walls, and above all a wall close behind a person,
+    which the static background cannot drop (the person's motion keeps the joined wall) and
+    whose noisy surface gives extremes everywhere. A body shows far less flat area (a torso
+    facing the camera, about 0.3 m^2); furniture's flat parts are not entities either.
+
+    Up to ``_WALL_PLANES`` planes, each the plane with the most inliers (within
+    ``floor_distance`` plus the depth noise's ``0.005 z^2``) among RANSAC hypotheses on a
+    strided sample, refined by least squares; its area is the sum of its inlier pixels'
+    footprints (the strided pixel's area at that depth, divided by the cosine between the
+    viewing ray and the plane's normal, at most 1/0.2), counted per 8-connected stretch of
+    inlier pixels: only stretches of at least that area go. ``valid`` (H, W): the strided
+    image's pixels that became the points, in order.
+    """
+    out = np.zeros(len(z), dtype=bool)
+    left = np.flatnonzero(keep)
+    pixel_of = np.flatnonzero(valid)  # point i is pixel pixel_of[i] of the strided image
+    stride = params.pixel_stride
+    pixel_area = (stride / intrinsics.fx) * (stride / intrinsics.fy)
+    for _ in range(_WALL_PLANES):
+        if len(left) < 3:
+            break
+        pts = np.stack([x[left], y[left], z[left]], axis=1)
+        sub = pts[::max(1, len(left) // _FLOOR_SAMPLE)]
+        idx = _hypotheses(len(sub), params.floor_iterations)
+        p0, p1, p2 = sub[idx[:, 0]], sub[idx[:, 1]], sub[idx[:, 2]]
+        normals = np.cross(p1 - p0, p2 - p0)
+        norms = np.linalg.norm(normals, axis=1)
+        ok = norms > 1e-9
+        if not ok.any():
+            break
+        normals = normals[ok] / norms[ok, None]
+        offsets = -np.einsum('ij,ij->i', normals, p0[ok])
+        tol_sub = params.floor_distance + _WALL_NOISE_Z2 * sub[:, 2:3] ** 2
+        on_sub = np.abs(sub @ normals.T + offsets) < tol_sub
+        best = int(np.argmax(np.count_nonzero(on_sub, axis=0)))
+        # The sample's estimate of the plane's area (each sample point stands for
+        # len(pts) / len(sub) points): far below the threshold, no full pass is needed.
+        hit = sub[on_sub[:, best]]
+        cos = np.abs(hit @ normals[best]) / np.linalg.norm(hit, axis=1)
+        estimate = np.sum(pixel_area * hit[:, 2] ** 2 / np.maximum(cos, 0.2)) * len(pts) / len(sub)
+        if estimate < _WALL_SAMPLE_SHARE * params.wall_min_area:
+            break
+        tol = params.floor_distance + _WALL_NOISE_Z2 * pts[:, 2] ** 2
+        on = np.abs(pts @ normals[best] + offsets[best]) < tol
+        if np.count_nonzero(on) < 3:
+            break
+        normal, offset = _refine_plane(pts[on], normals[best])
+        on = np.abs(pts @ normal + offset) < tol
+        ray = pts[on] / np.linalg.norm(pts[on], axis=1, keepdims=True)
+        footprint = pixel_area * pts[on, 2] ** 2 / np.maximum(np.abs(ray @ normal), 0.2)
+        # Only connected stretches of the plane that are large themselves: a slab at a
+        # person's depth also holds their torso and whatever stands beside them.
+        image = np.zeros(valid.shape, dtype=np.uint8)
+        image.reshape(-1)[pixel_of[left[on]]] = 1
+        _, labels = cv2.connectedComponents(image, connectivity=8, ltype=cv2.CV_32S)
+        part = labels.reshape(-1)[pixel_of[left[on]]]
+        large = np.bincount(part, weights=footprint) >= params.wall_min_area
+        wall = large[part]
+        if not wall.any():
+            break
+        out[left[on][wall]] = True
+        left = np.setdiff1d(left, left[on][wall], assume_unique=True)
+    return out
+
+
+#: Planes :func:`wall_points` looks for (a wall behind the person and one beside).
+_WALL_PLANES = 2
+#: A plane whose area the sample puts below this share of ``wall_min_area`` is not checked on
+#: all points.
+_WALL_SAMPLE_SHARE = 0.5
+#: Depth-noise term of the wall tolerance, metres per square metre of depth.
+_WALL_NOISE_Z2 = 0.005
 
 
 #: Pixels this close to the floor (metres) do not connect the static background's

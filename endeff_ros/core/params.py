@@ -53,6 +53,10 @@ class EndeffParams:
     floor_min_fraction: float = _p(0.05, 'A floor must hold at least this fraction of points.',
                                    lo=0.0, hi=1.0)
     floor_iterations: int = _p(40, 'RANSAC hypotheses for the floor plane.', lo=1, hi=10000)
+    wall_min_area: float = _p(1.0, 'Planes of any orientation that show at least this area '
+                              'inside the box (walls, a wall behind a person) are not entities '
+                              'and are dropped with the floor; 0 = off.', unit='m^2', lo=0.0,
+                              hi=100.0)
     background: bool = _p(True, 'Static background: learn a per-pixel background depth while '
                           'running and drop the connected parts of the foreground that never '
                           'moved (furniture, walls); off for a camera that moves all the time '
