@@ -159,15 +159,7 @@ def fit_floor(points: npt.NDArray[np.float64], *, distance: float, max_tilt_deg:
         idx = _hypotheses(len(sub), iterations)
     else:
         idx = rng.integers(0, len(sub), size=(iterations, 3))
-    p0, p1, p2 = sub[idx[:, 0]], sub[idx[:, 1]], sub[idx[:, 2]]
-    a, b = p1 - p0, p2 - p0
-    normals = np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],  # a x b (np.cross is slower)
-                        a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                        a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
-    norms = np.linalg.norm(normals, axis=1)
-    ok = norms > 1e-9
-    normals = normals[ok] / norms[ok, None]
-    p0 = p0[ok]
+    normals, p0 = _plane_hypotheses(sub, idx)
     # Orient every normal upwards (optical frame: up is -y).
     normals *= np.where(normals[:, 1] > 0, -1.0, 1.0)[:, None]
     cos_tilt = math.cos(math.radians(max_tilt_deg))
@@ -197,6 +189,20 @@ def _hypotheses(n: int, iterations: int) -> npt.NDArray[np.int64]:
     idx = np.random.default_rng(0).integers(0, n, size=(iterations, 3))
     idx.flags.writeable = False
     return idx
+
+
+def _plane_hypotheses(points: npt.NDArray[np.float64], idx: npt.NDArray[np.int64],
+                      ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Unit normals and one point each of the planes through the index triples ``idx`` (H, 3)
+    of ``points``; degenerate (collinear) triples are left out."""
+    p0, p1, p2 = points[idx[:, 0]], points[idx[:, 1]], points[idx[:, 2]]
+    a, b = p1 - p0, p2 - p0
+    normals = np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],  # a x b (np.cross is slower)
+                        a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                        a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+    norms = np.linalg.norm(normals, axis=1)
+    ok = norms > 1e-9
+    return normals[ok] / norms[ok, None], p0[ok]
 
 
 def _refine_plane(points: npt.NDArray[np.float64],
@@ -313,23 +319,17 @@ def wall_points(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
             break
         pts = np.stack([x[left], y[left], z[left]], axis=1)
         sub = pts[::max(1, len(left) // _FLOOR_SAMPLE)]
-        idx = _hypotheses(len(sub), params.floor_iterations)
-        p0, p1, p2 = sub[idx[:, 0]], sub[idx[:, 1]], sub[idx[:, 2]]
-        normals = np.cross(p1 - p0, p2 - p0)
-        norms = np.linalg.norm(normals, axis=1)
-        ok = norms > 1e-9
-        if not ok.any():
+        normals, p0 = _plane_hypotheses(sub, _hypotheses(len(sub), params.floor_iterations))
+        if not len(normals):
             break
-        normals = normals[ok] / norms[ok, None]
-        offsets = -np.einsum('ij,ij->i', normals, p0[ok])
+        offsets = -np.einsum('ij,ij->i', normals, p0)
         tol_sub = params.floor_distance + _WALL_NOISE_Z2 * sub[:, 2:3] ** 2
         on_sub = np.abs(sub @ normals.T + offsets) < tol_sub
         best = int(np.argmax(np.count_nonzero(on_sub, axis=0)))
         # The sample's estimate of the plane's area (each sample point stands for
         # len(pts) / len(sub) points): far below the threshold, no full pass is needed.
-        hit = sub[on_sub[:, best]]
-        cos = np.abs(hit @ normals[best]) / np.linalg.norm(hit, axis=1)
-        estimate = np.sum(pixel_area * hit[:, 2] ** 2 / np.maximum(cos, 0.2)) * len(pts) / len(sub)
+        estimate = (_footprints(sub[on_sub[:, best]], normals[best], pixel_area).sum()
+                    * len(pts) / len(sub))
         if estimate < _WALL_SAMPLE_SHARE * params.wall_min_area:
             break
         tol = params.floor_distance + _WALL_NOISE_Z2 * pts[:, 2] ** 2
@@ -337,22 +337,30 @@ def wall_points(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
         if np.count_nonzero(on) < 3:
             break
         normal, offset = _refine_plane(pts[on], normals[best])
-        on = np.abs(pts @ normal + offset) < tol
-        ray = pts[on] / np.linalg.norm(pts[on], axis=1, keepdims=True)
-        footprint = pixel_area * pts[on, 2] ** 2 / np.maximum(np.abs(ray @ normal), 0.2)
+        on = np.flatnonzero(np.abs(pts @ normal + offset) < tol)
         # Only connected stretches of the plane that are large themselves: a slab at a
         # person's depth also holds their torso and whatever stands beside them.
+        pixels = pixel_of[left[on]]
         image = np.zeros(valid.shape, dtype=np.uint8)
-        image.reshape(-1)[pixel_of[left[on]]] = 1
+        image.reshape(-1)[pixels] = 1
         _, labels = cv2.connectedComponents(image, connectivity=8, ltype=cv2.CV_32S)
-        part = labels.reshape(-1)[pixel_of[left[on]]]
-        large = np.bincount(part, weights=footprint) >= params.wall_min_area
-        wall = large[part]
-        if not wall.any():
+        part = labels.reshape(-1)[pixels]
+        area = np.bincount(part, weights=_footprints(pts[on], normal, pixel_area))
+        gone = on[(area >= params.wall_min_area)[part]]
+        if not len(gone):
             break
-        out[left[on][wall]] = True
-        left = np.setdiff1d(left, left[on][wall], assume_unique=True)
+        out[left[gone]] = True
+        left = np.delete(left, gone)
     return out
+
+
+def _footprints(points: npt.NDArray[np.float64], normal: npt.NDArray[np.float64],
+                pixel_area: float) -> npt.NDArray[np.float64]:
+    """Area (m^2) of the plane with ``normal`` that each of ``points`` (N, 3) stands for: the
+    strided pixel's footprint ``pixel_area * z^2`` over the cosine between its viewing ray and
+    the normal, at most 1/0.2 (grazing views)."""
+    cos = np.abs(points @ normal) / np.linalg.norm(points, axis=1)
+    return pixel_area * points[:, 2] ** 2 / np.maximum(cos, 0.2)
 
 
 #: Planes :func:`wall_points` looks for (a wall behind the person and one beside).
