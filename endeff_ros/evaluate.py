@@ -103,7 +103,11 @@ def _background_estimate() -> EstimateFn:
 
     def estimate(frame: RGBDFrame, params: EndeffParams | None) -> Any:
         params = params or EndeffParams()
-        return estimate_frame(frame, params, background=model if params.background else None)
+        if not params.background:
+            return estimate_frame(frame, params)
+        estimate = estimate_frame(frame, params, background=model)
+        model.observe_color(frame.color, frame.stamp_ns)
+        return estimate
 
     return estimate
 

@@ -34,16 +34,40 @@ background model removes what never moved, with the person present from the firs
   On the furnished rooms bags no component of furniture or wall had a single changed pixel
   left after the opening, while a person who barely moves (a small wave, ToF sensor) had
   0.1-0.3 % of theirs: hence the low fraction.
+- **Colour motion**: a person who barely moves (idle sway, a still person seen from the back
+  whose hands move in front of them) changes the depth by less than the margin for seconds,
+  and would be dropped with the furniture when learning ends (docs/design.md has the
+  measurements). The registered colour image sees them: the grey level of the strided image
+  against the one ``COLOR_LAG_S`` before changes on the texture and outline of whatever
+  moved by a pixel or two, while on static furniture it only shows sensor noise. Pixels that
+  changed by more than ``COLOR_NOISE_K`` robust deviations of the image's difference (and
+  ``COLOR_MIN_STEP`` grey levels), and whose depth did not turn farther since (where an arm
+  was, the lamp now seen behind it is not what moved), are *stirred*; a component with
+  ``COLOR_MIN_FRACTION`` of its pixels stirred moves, ten times the depth's fraction, since
+  what colour sees and depth does not (a shadow, a screen) is spread thin over a surface.
+  Certified-static pixels (below) within ``COLOR_RELEASE_PX`` of a stirred pixel are
+  released: a person certified while standing still moves again. No colour evidence in a
+  frame when most of the image stirred or more than ``COLOR_OUTSIDE_FRACTION`` of what holds
+  no entity (floor, walls, beyond the box) did: the light changed, or the camera moved
+  (while a pan settles, every texture edge stirs). Without colour (none in the stream, or
+  this frame's was lost) depth alone decides. What stays static in depth but changes in
+  colour (a screen showing a film, a shadow cast on a table) is kept like a mover. The
+  evidence is one frame late (:meth:`BackgroundModel.observe_color` learns a frame's colour
+  after its depth): the node runs Sections 3-4 before the colour image arrives, and must see
+  what ``endeff process`` sees.
 - **Certified static**: pixels dropped for ``STATIC_S`` at a steady depth stay dropped when
   a moving component joins them (the large edge step joins a person to the furniture beside
   them), until something changes in front of them or they turn farther.
-- **Learning**: for ``background_learn_s`` after the start (and after a re-learn) everything
-  is kept; components then need changed pixels. Every frame of it keeps the furniture's
-  false positives (1 s of 3 s bags kept furnished rooms at FPR 0.25-0.29 against 0.01-0.17
-  empty), but dropping at once drops a person present from frame 0 until they have moved by
-  more than the margin; a moving person's changed pixels survive the opening within a few
-  frames, so the default is short (0.2 s). Bookkeeping that would certify pixels as static
-  also waits for its end (a person's torso would be certified before their arm first moved).
+- **Learning**: for ``background_learn_s`` after the start (and after a re-learn) no depth
+  change can show yet. With colour evidence only the components that stir are kept (from the
+  third frame: colour evidence is the frame before's, and the first has nothing to compare
+  with); without it everything is kept. Every frame that keeps everything keeps the
+  furniture's false positives (1 s of 3 s bags kept furnished rooms at FPR 0.25-0.29 against
+  0.01-0.17 empty), but dropping at once drops a person present from frame 0 until they have
+  moved by more than the margin; a moving person's changed pixels survive the opening within
+  a few frames, so the default is short (0.2 s). Bookkeeping that would certify pixels as
+  static also waits for its end (a person's torso would be certified before their arm first
+  moved).
 - **Absorption**: a pixel that stays nearer than the background, at a steady depth, for
   ``background_absorb_s`` becomes background (an object put down and left). Pixels of a
   component holding a track (:meth:`BackgroundModel.protect`, called by the tracker) restart
@@ -116,6 +140,25 @@ STATIC_S = 0.25
 CARRY_AFTER_S = 0.3
 #: Window (pixels of the strided image, each side) in which a track finds its component.
 PROTECT_RADIUS_PX = 2
+#: Colour motion: the grey image is compared with the one this long before (s) ...
+COLOR_LAG_S = 0.2
+#: ... and a pixel stirred when its grey level changed by more than this many robust noise
+#: deviations of the whole image's difference, and by at least COLOR_MIN_STEP levels.
+COLOR_NOISE_K = 6.0
+COLOR_MIN_STEP = 10
+#: A component moves by colour alone when this fraction of its pixels (and MIN_CHANGED_PX)
+#: stirred: ten times the depth's fraction, for what colour sees and depth does not (a
+#: shadow, a screen) is spread thin over a surface.
+COLOR_MIN_FRACTION = 0.01
+#: More than this fraction of the image stirred: the light or the exposure changed, or the
+#: camera moved; colour says nothing about what moved in that frame.
+COLOR_GLOBAL_FRACTION = 0.3
+#: More than this fraction of the pixels that hold no entity (floor, walls, beyond the box)
+#: stirred: the same, for a change too small for the whole image to show it.
+COLOR_OUTSIDE_FRACTION = 0.01
+#: Certified-static pixels within this many pixels (strided image) of a stirred one are
+#: released.
+COLOR_RELEASE_PX = 4
 
 
 def depth_components(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_],
@@ -153,6 +196,45 @@ def far_side_pixels(depth: npt.NDArray[np.float32], stride: int) -> npt.NDArray[
     return far
 
 
+def strided_grey(color: npt.NDArray[np.uint8], shape: tuple[int, int]) -> npt.NDArray[np.uint8]:
+    """Grey levels of a colour (H, W, 3) or mono (H, W) uint8 image averaged down to ``shape``
+    (the strided depth image's): the average also halves the per-pixel noise at stride 2."""
+    grey = color if color.ndim == 2 else cv2.cvtColor(color, cv2.COLOR_RGB2GRAY)
+    if grey.dtype != np.uint8:
+        grey = np.clip(grey, 0, 255).astype(np.uint8)
+    return cv2.resize(grey, (shape[1], shape[0]), interpolation=cv2.INTER_AREA)
+
+
+def _enough(labels: npt.NDArray[np.int32], hits: npt.NDArray[np.bool_],
+            total: npt.NDArray[np.int64], fraction: float, stride: int) -> npt.NDArray[np.bool_]:
+    """Per label of ``labels``, whether enough of its pixels are ``hits``: ``fraction`` of its
+    ``total`` pixels and MIN_CHANGED_PX full-resolution pixels (label 0: never)."""
+    need = np.maximum(MIN_CHANGED_PX / stride ** 2, fraction * total)
+    enough = np.bincount(labels[hits], minlength=len(total)) >= need
+    enough[0] = False
+    return enough
+
+
+def _with_feet(out: npt.NDArray[np.bool_], depth: npt.NDArray[np.float32],
+               low: npt.NDArray[np.bool_] | None, candidate: npt.NDArray[np.bool_],
+               far_side: npt.NDArray[np.bool_], stride: int) -> npt.NDArray[np.bool_]:
+    """``out`` and the parts of the band just above the floor (``low``, split at depth edges)
+    that touch a pixel of ``out`` at their depth: feet, not the wall's foot beside a
+    person's legs."""
+    if low is None:
+        return out
+    box = np.ones((3, 3), np.uint8)
+    hi = cv2.dilate(np.where(out, depth, 0).astype(np.float32), box)
+    lo = cv2.erode(np.where(out, depth, np.inf).astype(np.float32), box)
+    step = np.float32(EDGE_STEP + EDGE_STEP_Z * 3.0) * stride
+    low_labels, _ = depth_components(depth, low & candidate, stride, far_side)
+    touch = (low_labels > 0) & (depth >= lo - step) & (depth <= hi + step)
+    attached = np.zeros(int(low_labels.max()) + 1, bool)
+    attached[low_labels[touch]] = True
+    attached[0] = False
+    return out | attached[low_labels]
+
+
 def _windows(image: npt.NDArray, uv: npt.NDArray[np.int64]) -> npt.NDArray:
     """(N, (2r + 1)^2) values of ``image`` around N pixels (u, v), r = PROTECT_RADIUS_PX,
     clipped at the border."""
@@ -184,6 +266,10 @@ class BackgroundModel:
         self._carried_uv = np.zeros((0, 2), np.int64)  # their pixels in the last frame
         self._labels: npt.NDArray[np.int32] | None = None
         self._learn_until = 0.0
+        # (time, strided grey, strided depth) of the recent frames
+        self._greys: list[tuple[float, npt.NDArray[np.uint8], npt.NDArray[np.float32]]] = []
+        self._last: tuple | None = None  # what observe_color needs of the last frame
+        self._evidence: npt.NDArray[np.bool_] | None = None  # stirred pixels, for the next
         self._last_raw: float | None = None
         self._offset = 0.0
         self._t = 0.0
@@ -231,6 +317,51 @@ class BackgroundModel:
         self._out = np.zeros(shape, bool)
         self._learn_until = t + params.background_learn_s
         self._settling = False
+        self._greys = []
+
+    def _remember(self, stamp_ns: int, depth: npt.NDArray[np.float32],
+                  valid: npt.NDArray[np.bool_], candidate: npt.NDArray[np.bool_],
+                  params: EndeffParams) -> None:
+        """Keep what :meth:`observe_color` needs of the frame :meth:`foreground` took."""
+        margin = np.float32(params.background_margin) + np.float32(NOISE_Z2) * depth * depth
+        self._last = (stamp_ns, self._t, depth, margin, valid & ~candidate)
+
+    def observe_color(self, color: npt.NDArray[np.uint8] | None, stamp_ns: int) -> None:
+        """Learn the colour motion of the frame :meth:`foreground` just took (the same stamp):
+        ``color`` (H, W, 3) or (H, W) uint8, registered to its depth image. The pixels whose
+        grey level changed since ``COLOR_LAG_S`` before (or since the oldest grey image kept,
+        shortly after learning began) beyond the image's own noise, and whose depth did not
+        turn farther than the margin since then (where a thing was and left, the change is
+        the thing's, not that of what is seen behind it now), are the evidence the next frame
+        uses. None (depth alone decides) without colour, for the first grey image, or when
+        most of the image or more than ``COLOR_OUTSIDE_FRACTION`` of what holds no entity
+        stirred.
+
+        Colour comes after the depth's Sections 3-4 (the node starts those before the colour
+        image arrives), hence the one frame's delay: every caller sees the same evidence.
+        """
+        self._evidence = None
+        last = self._last
+        if color is None or last is None or last[0] != stamp_ns:
+            return
+        _, t, depth, margin, outside = last
+        grey = strided_grey(color, depth.shape)
+        greys = self._greys
+        while len(greys) >= 2 and greys[1][0] <= t - COLOR_LAG_S:
+            greys.pop(0)
+        reference = greys[0] if greys else None
+        greys.append((t, grey, depth))
+        if reference is None:
+            return
+        diff = cv2.absdiff(grey, reference[1])
+        counts = np.bincount(diff.ravel(), minlength=256)
+        median = int(np.searchsorted(np.cumsum(counts), diff.size / 2))
+        stirred = diff > max(COLOR_MIN_STEP, COLOR_NOISE_K * 1.4826 * median)
+        if (np.count_nonzero(stirred) > COLOR_GLOBAL_FRACTION * diff.size
+                or np.count_nonzero(stirred & outside)
+                > COLOR_OUTSIDE_FRACTION * np.count_nonzero(outside)):
+            return  # the light changed or the camera moved: nothing to tell
+        self._evidence = stirred & ~(depth > reference[2] + margin)
 
     def foreground(self, depth: npt.NDArray[np.floating], candidate: npt.NDArray[np.bool_],
                    stamp_ns: int, params: EndeffParams, *,
@@ -243,7 +374,8 @@ class BackgroundModel:
         and off the floor; ``stamp_ns`` the frame's stamp; ``low`` (H, W) optional, the
         candidate pixels just above the floor, which do not connect components (the floor's
         noisy remnants would join a person's feet to a chair's legs) and are kept next to a
-        kept pixel. Returns an (H, W) mask, a subset of ``candidate``.
+        kept pixel. Returns an (H, W) mask, a subset of ``candidate``. The colour motion
+        used is what :meth:`observe_color` saw in the frame before.
         """
         d = np.nan_to_num(np.asarray(depth, dtype=np.float32), nan=0.0, posinf=0.0,
                           neginf=0.0)
@@ -255,6 +387,7 @@ class BackgroundModel:
             self.resets += self._reset_requested
             self._reset_requested = False
             self._learn(d, valid, t, params)
+            self._remember(stamp_ns, d, valid, candidate, params)
             self._labels, _ = depth_components(d, candidate, stride)
             return candidate.copy()
         bg = self._bg
@@ -262,6 +395,8 @@ class BackgroundModel:
         margin = np.float32(params.background_margin) + np.float32(NOISE_Z2) * bg * bg
         nearer = known & (d < bg - margin)
         farther = known & (d > bg + margin)
+        stirred, self._evidence = self._evidence, None
+        self._remember(stamp_ns, d, valid, candidate, params)
 
         n_known = int(np.count_nonzero(known))
         if n_known >= MIN_KNOWN_FRACTION * d.size:
@@ -313,17 +448,21 @@ class BackgroundModel:
         far_side = far_side_pixels(d, stride)
         labels, edge = depth_components(d, upper, stride, far_side)
         self._labels = labels
+        n = int(labels.max()) + 1
+        total = np.bincount(labels.ravel(), minlength=n)
         if t < self._learn_until:
-            return candidate.copy()
+            if stirred is None:
+                return candidate.copy()
+            # Learning with colour: only what stirs (a person present from the start has not
+            # moved in depth yet; furniture does neither).
+            out = _enough(labels, stirred, total, COLOR_MIN_FRACTION, stride)[labels] & candidate
+            return _with_feet(out, d, low, candidate, far_side, stride)
         changed = cv2.morphologyEx(((nearer & ~absorb) | (fresh & ~adopt)).view(np.uint8),
                                    cv2.MORPH_OPEN,
                                    np.ones((3, 3), np.uint8)).view(bool)
-        n = int(labels.max()) + 1
-        total = np.bincount(labels.ravel(), minlength=n)
-        hits = np.bincount(labels[changed], minlength=n)
-        need = np.maximum(MIN_CHANGED_PX / stride ** 2, MIN_CHANGED_FRACTION * total)
-        moving = hits >= need
-        moving[0] = False
+        moving = _enough(labels, changed, total, MIN_CHANGED_FRACTION, stride)
+        if stirred is not None:
+            moving |= _enough(labels, stirred, total, COLOR_MIN_FRACTION, stride)
         # Held: pixels kept because of changed pixels within HOLD_S, at the same depth (the
         # same surface, not the wall an arm swept over).
         recent = (t - self._kept_t <= HOLD_S) & (np.abs(d - self._kept_z) <= margin)
@@ -348,22 +487,17 @@ class BackgroundModel:
         # That surface is gone: something changed in front of it, or it left (a single
         # flying pixel at an edge does neither: the opening removed it from changed).
         gone = fg & ~margin_ok & (changed | (d > self._static_z + margin))
+        if stirred is not None:
+            # ... or it stirs: a person who stood still long enough to be certified (from the
+            # start, or in a pause) and moves again by less than the margin.
+            k = 2 * COLOR_RELEASE_PX + 1
+            gone |= fg & cv2.dilate(stirred.view(np.uint8), np.ones((k, k), np.uint8)).view(bool)
         self._static_z[gone] = 0
         static = (self._static_z > 0) & margin_ok & (t - self._static_since >= STATIC_S)
         out = (fg & ~(static & ~changed)) | (edge & changed)
+        out = _with_feet(out, d, low, candidate, far_side, stride)
         if low is not None:
-            # Feet: the parts of the band just above the floor (split at depth edges) that
-            # touch a kept pixel at their depth (not the wall's foot beside a person's legs).
-            box = np.ones((3, 3), np.uint8)
-            hi = cv2.dilate(np.where(out, d, 0).astype(np.float32), box)
-            lo = cv2.erode(np.where(out, d, np.inf).astype(np.float32), box)
-            step = np.float32(EDGE_STEP + EDGE_STEP_Z * 3.0) * stride
-            low_labels, _ = depth_components(d, low & candidate, stride, far_side)
-            touch = (low_labels > 0) & (d >= lo - step) & (d <= hi + step)
-            attached = np.zeros(int(low_labels.max()) + 1, bool)
-            attached[low_labels[touch]] = True
-            attached[0] = False
-            out |= attached[low_labels] | (low & candidate & changed)
+            out |= low & candidate & changed
         self._out = out
         return out
 

@@ -166,6 +166,8 @@ class Tracker:
         otherwise."""
         if estimate is None:
             estimate = self.estimate(frame)
+        if self.params.background:  # colour motion, for the next frame's background
+            self.background.observe_color(frame.color, frame.stamp_ns)
         self._floor = estimate.floor
         stages = dict(estimate.stage_ms)
         t0 = time.perf_counter()

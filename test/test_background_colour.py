@@ -1,0 +1,141 @@
+"""Colour motion in the static background (core/background.py): a person who moves by less
+than the depth margin is told from furniture by the registered colour image, also while the
+background is learnt; a change of light or a shaking camera is no motion.
+
+The scenes of test_background.py (flat parts painted into 640x480 depth images) with a grey
+texture of 8x8-pixel blocks: the room and the chair keep theirs, the person's texture slides
+by a pixel a frame (a motion their depth does not show at all).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from test_background import (
+    CHAIR_X,
+    CHAIR_Z,
+    DT_NS,
+    PARAMS,
+    PERSON_Z,
+    add_chair,
+    add_person,
+    points_near,
+    room,
+)
+
+from endeff_ros.core.background import BackgroundModel, strided_grey
+from endeff_ros.core.single_frame import estimate_frame
+from endeff_ros.core.tracker import Tracker
+from endeff_ros.core.types import KINECT_640 as K
+from endeff_ros.core.types import RGBDFrame
+
+PERSON_X = -0.5
+BLOCK = 8
+
+
+def _texture(seed: int) -> np.ndarray:
+    blocks = np.random.default_rng(seed).integers(40, 215, (K.height // BLOCK + 1,
+                                                           K.width // BLOCK + 1))
+    return np.kron(blocks, np.ones((BLOCK, BLOCK)))[:K.height, :K.width]
+
+
+ROOM_TEXTURE, PERSON_TEXTURE = _texture(1), _texture(2)
+
+
+def still_person_frame(k: int, *, sway: bool = True, light: int = 0,
+                       shake: int = 0) -> RGBDFrame:
+    """Frame ``k``: room, chair and a person standing still in depth; with ``sway`` their
+    texture slides by a pixel a frame; ``light`` adds to every grey level; ``shake`` shifts
+    the whole colour image by that many pixels (a camera shaking too little for the depth)."""
+    depth = room().copy()
+    add_chair(depth)
+    alone = np.full(depth.shape, np.inf, np.float32)
+    add_person(alone, PERSON_X, 0.3)
+    add_person(depth, PERSON_X, 0.3)
+    grey = ROOM_TEXTURE.copy()
+    shift = k % 8 if sway else 0  # never the same shift 1 to 7 frames apart
+    person = np.isfinite(alone)
+    grey[person] = np.roll(PERSON_TEXTURE, shift, axis=1)[person]
+    rng = np.random.default_rng(k)
+    grey = np.roll(grey, shake, axis=1) + light + rng.normal(0.0, 2.0, grey.shape)
+    color = np.repeat(np.clip(grey, 0, 255).astype(np.uint8)[:, :, None], 3, axis=2)
+    noisy = depth + rng.normal(0.0, 0.003, depth.shape).astype(np.float32)
+    return RGBDFrame(stamp_ns=k * DT_NS, frame_id='camera', depth=noisy, intrinsics=K,
+                     color=color)
+
+
+def _run(n: int, **kw) -> tuple[BackgroundModel, list[tuple[bool, int, int]]]:
+    """(learning, person points, chair points) per frame of ``n`` frames."""
+    model = BackgroundModel()
+    out = []
+    for k in range(n):
+        args = {name: value(k) if callable(value) else value for name, value in kw.items()}
+        f = still_person_frame(k, **args)
+        est = estimate_frame(f, PARAMS, background=model)
+        model.observe_color(f.color, f.stamp_ns)
+        out.append((model.learning, points_near(est.points, PERSON_X, PERSON_Z),
+                    points_near(est.points, CHAIR_X, CHAIR_Z)))
+    return model, out
+
+
+def test_person_moving_less_than_the_margin_is_kept_by_colour():
+    model, out = _run(45)
+    learnt = [f for f in out if not f[0]]
+    assert not model.learning and len(learnt) >= 29
+    assert all(person > 300 and chair == 0 for _, person, chair in learnt)
+
+
+def test_without_colour_motion_the_still_person_is_background():
+    """The same scene with the person's texture still (a mannequin): dropped with the chair
+    once learnt, so the colour is what kept the person above."""
+    _, out = _run(45, sway=False)
+    assert all(person == 0 and chair == 0 for learning, person, chair in out[20:])
+
+
+def test_learning_with_colour_reports_only_what_stirs():
+    """While the background is learnt nothing moved in depth yet, but the colour shows
+    what moves: the chair is not reported once there is colour evidence, the person is."""
+    _, out = _run(15)
+    assert all(learning for learning, _, _ in out)
+    # The first two frames: nothing to compare with (colour evidence is the frame before's).
+    assert all(person > 300 and chair > 50 for _, person, chair in out[:2])
+    assert all(person > 300 and chair == 0 for _, person, chair in out[2:])
+
+
+def test_light_change_is_no_motion():
+    """Every grey level jumps by 40 (a lamp switched on) while the mannequin stands still:
+    no colour evidence in that frame, nothing comes back."""
+    _, out = _run(45, sway=False, light=lambda k: 40 if k >= 30 else 0)
+    assert all(person == 0 and chair == 0 for _, person, chair in out[20:])
+
+
+def test_camera_shaking_in_colour_only_is_no_motion():
+    """The colour image shakes by a pixel (a camera on a vibrating robot) while the depth
+    shows nothing: the floor and walls stir too, so colour says nothing about the scene."""
+    _, out = _run(45, sway=False, shake=lambda k: k % 2 if k >= 30 else 0)
+    assert all(person == 0 and chair == 0 for _, person, chair in out[20:])
+
+
+def test_tracker_takes_colour_motion_also_when_depth_comes_first():
+    """The node runs Sections 3-4 on a depth image before its colour partner arrives and
+    passes that estimate to the update: the tracker then sees the colour motion just as when
+    it estimates the whole frame itself (`endeff process`), and keeps the still person."""
+    whole, early = Tracker(PARAMS), Tracker(PARAMS)
+    for k in range(40):
+        f = still_person_frame(k)
+        a = whole.update(f)
+        depth_only = RGBDFrame(f.stamp_ns, f.frame_id, f.depth, f.intrinsics)
+        b = early.update(f, estimate=early.estimate(depth_only))
+        assert np.array_equal(a.estimate.points, b.estimate.points)
+        assert [t.id for t in a.tracks] == [t.id for t in b.tracks]
+    assert not whole.background.learning
+    assert points_near(a.estimate.points, PERSON_X, PERSON_Z) > 300
+    assert points_near(a.estimate.points, CHAIR_X, CHAIR_Z) == 0
+
+
+def test_strided_grey_of_colour_and_mono():
+    color = np.zeros((4, 6, 3), np.uint8)
+    color[:2, :2] = 200
+    grey = strided_grey(color, (2, 3))
+    assert grey.shape == (2, 3) and grey.dtype == np.uint8
+    assert grey[0, 0] == 200 and grey[1, 2] == 0
+    assert np.array_equal(strided_grey(color[:, :, 0], (2, 3)), grey)
