@@ -402,3 +402,23 @@ def test_depth_median_removes_a_flying_pixel_and_fills_a_pinhole():
     assert np.count_nonzero(filtered[:, 2] > 2.5) == 0
     assert len(filtered) == 48 * 64
     np.testing.assert_allclose(filtered[:, 2], 2.0)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    'Known defect: the RANSAC hypotheses are drawn from all points, so a floor that is about a '
+    'tenth of them (a level camera, a wall filling the default 3.5 m wide box) is hit by no '
+    'triple of the fixed table and not found; the wall rule then usually drops it as a plane. '
+    'Drawing half the triples from the lowest points finds it but took a table top for a floor '
+    '(test_fit_floor_none_when_the_only_horizontal_surface_has_points_below).'))
+def test_fit_floor_finds_a_floor_that_a_wall_outnumbers():
+    from test_background import CHAIR_Z, add_chair, add_person, room
+
+    from endeff_ros.core.cloud import foreground_cloud
+
+    depth = room().copy()
+    add_chair(depth)
+    add_person(depth, 0.2, 0.5, z=CHAIR_Z + 0.1)
+    params = EndeffParams(floor_iterations=400, wall_min_area=0.0)
+    _, floor = foreground_cloud(depth, KINECT_640, params)
+    assert floor is not None
+    assert _angle_deg(floor.normal, [0.0, -1.0, 0.0]) < 2.0

@@ -31,9 +31,11 @@ class EndeffParams:
     """All tuning parameters; defaults suit a person 1-4 m from a Kinect/RealSense-class camera."""
 
     # --- Section 3: depth to foreground cloud -------------------------------------------------
-    box_min_x: float = _p(-1.6, 'Foreground box, minimum x (optical frame, right).', unit='m',
+    # x +-3.5 m spans 78 degrees at the box's 4.3 m depth: the sides do not cut people whom a
+    # wide-angle sensor (D435/D455 87 degrees) sees within its depth (docs/design.md).
+    box_min_x: float = _p(-3.5, 'Foreground box, minimum x (optical frame, right).', unit='m',
                           lo=-20.0, hi=20.0)
-    box_max_x: float = _p(1.6, 'Foreground box, maximum x.', unit='m', lo=-20.0, hi=20.0)
+    box_max_x: float = _p(3.5, 'Foreground box, maximum x.', unit='m', lo=-20.0, hi=20.0)
     box_min_y: float = _p(-2.0, 'Foreground box, minimum y (optical frame, down).', unit='m',
                           lo=-20.0, hi=20.0)
     box_max_y: float = _p(2.0, 'Foreground box, maximum y.', unit='m', lo=-20.0, hi=20.0)
