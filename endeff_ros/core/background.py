@@ -361,6 +361,8 @@ class BackgroundModel:
                 or np.count_nonzero(stirred & outside)
                 > COLOR_OUTSIDE_FRACTION * np.count_nonzero(outside)):
             return  # the light changed or the camera moved: nothing to tell
+        # No reading then counts as farther than anything, as for the background itself
+        # (letting such pixels stir kept more furniture: docs/results.md).
         self._evidence = stirred & ~(depth > reference[2] + margin)
 
     def foreground(self, depth: npt.NDArray[np.floating], candidate: npt.NDArray[np.bool_],
