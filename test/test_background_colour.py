@@ -16,6 +16,7 @@ from test_background import (
     DT_NS,
     PARAMS,
     PERSON_Z,
+    _turned,
     add_chair,
     add_person,
     points_near,
@@ -130,6 +131,90 @@ def test_tracker_takes_colour_motion_also_when_depth_comes_first():
     assert not whole.background.learning
     assert points_near(a.estimate.points, PERSON_X, PERSON_Z) > 300
     assert points_near(a.estimate.points, CHAIR_X, CHAIR_Z) == 0
+
+
+def _colour_frame(k: int, depth: np.ndarray, person: np.ndarray, *, room_shift: int = 0,
+                  with_colour: bool = True) -> RGBDFrame:
+    """Frame ``k`` of ``depth`` with the room's texture (shifted by ``room_shift`` pixels, as
+    a pan moves it) and the person's texture, sliding by a pixel a frame, on ``person``."""
+    rng = np.random.default_rng(k)
+    grey = np.roll(ROOM_TEXTURE, -room_shift, axis=1).copy()
+    grey[person] = np.roll(PERSON_TEXTURE, k % 8, axis=1)[person]
+    grey = grey + rng.normal(0.0, 2.0, grey.shape)
+    color = np.repeat(np.clip(grey, 0, 255).astype(np.uint8)[:, :, None], 3, axis=2)
+    noisy = depth + rng.normal(0.0, 0.003, depth.shape).astype(np.float32)
+    return RGBDFrame(stamp_ns=k * DT_NS, frame_id='camera', depth=noisy, intrinsics=K,
+                     color=color if with_colour else None)
+
+
+def _runner_past_the_chair(with_colour: bool) -> list[int]:
+    """A person running across (4 m/s) between the camera and the chair, every frame; the
+    chair's foreground points per frame."""
+    model = BackgroundModel()
+    chair = []
+    for k in range(60):
+        depth = room().copy()
+        add_chair(depth)
+        alone = np.full(depth.shape, np.inf, np.float32)
+        x = -2.2 + 4.0 * (k % 30) / 30  # passes in front of the chair twice
+        add_person(alone, x, 0.3, z=1.5)
+        add_person(depth, x, 0.3, z=1.5)
+        f = _colour_frame(k, depth, np.isfinite(alone), with_colour=with_colour)
+        est = estimate_frame(f, PARAMS, background=model)
+        model.observe_color(f.color, f.stamp_ns)
+        chair.append(points_near(est.points, CHAIR_X, CHAIR_Z))
+    return chair
+
+
+def test_colour_of_a_runner_that_left_does_not_move_the_chair():
+    """The colour evidence is the frame before's: where the runner was then, the chair is
+    seen now. It holds only for the surface that was there, so the chair stays background
+    (as with depth alone)."""
+    assert max(_runner_past_the_chair(with_colour=False)[20:]) == 0
+    assert max(_runner_past_the_chair(with_colour=True)[20:]) == 0
+
+
+def _walk_away(with_colour: bool) -> int:
+    """A person 0.9 m from the camera walks away and to the side (1.2 m/s, 0.9 m/s), covering
+    a fifth of the image at first: the camera motions detected."""
+    model = BackgroundModel()
+    for k in range(45):
+        depth = room().copy()
+        add_chair(depth)
+        alone = np.full(depth.shape, np.inf, np.float32)
+        z = 0.9 + 0.04 * k
+        add_person(alone, 0.03 * k, 0.3, z=z)
+        add_person(depth, 0.03 * k, 0.3, z=z)
+        f = _colour_frame(k, depth, np.isfinite(alone), with_colour=with_colour)
+        estimate_frame(f, PARAMS, background=model)
+        model.observe_color(f.color, f.stamp_ns)
+    return model.relearns
+
+
+def test_person_walking_away_close_to_the_camera_is_no_camera_motion():
+    """Depth alone takes a large person walking away for a pan (as many pixels nearer and
+    farther); the colour image shows floor and walls still, so the background is kept."""
+    assert _walk_away(with_colour=False) >= 1
+    assert _walk_away(with_colour=True) == 0
+
+
+def test_camera_pan_with_colour_relearns():
+    """A 20 degree pan with the colour image panning with the depth: the whole image
+    changes, colour says nothing, and the depth's camera motion re-learns the background."""
+    model = BackgroundModel()
+    static = room().copy()
+    add_chair(static)
+    none = np.zeros(static.shape, bool)
+    for k in range(75):
+        s = np.clip((k - 30) / 30, 0.0, 1.0)
+        yaw = float(np.radians(20.0) * 0.5 * (1 - np.cos(np.pi * s)))
+        depth = _turned(static, yaw) if yaw else static
+        shift = int(round(K.fx * np.tan(yaw)))
+        f = _colour_frame(k, depth, none, room_shift=shift)
+        est = estimate_frame(f, PARAMS, background=model)
+        model.observe_color(f.color, f.stamp_ns)
+    assert model.relearns >= 1
+    assert est.points.shape[0] == 0  # the turned chair is background again
 
 
 def test_strided_grey_of_colour_and_mono():

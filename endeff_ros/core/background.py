@@ -47,14 +47,19 @@ background model removes what never moved, with the person present from the firs
   what colour sees and depth does not (a shadow, a screen) is spread thin over a surface.
   Certified-static pixels (below) within ``COLOR_RELEASE_PX`` of a stirred pixel are
   released: a person certified while standing still moves again. No colour evidence in a
-  frame when most of the image stirred or more than ``COLOR_OUTSIDE_FRACTION`` of what holds
-  no entity (floor, walls, beyond the box) did: the light changed, or the camera moved
-  (while a pan settles, every texture edge stirs). Without colour (none in the stream, or
-  this frame's was lost) depth alone decides. What stays static in depth but changes in
-  colour (a screen showing a film, a shadow cast on a table) is kept like a mover. The
-  evidence is one frame late (:meth:`BackgroundModel.observe_color` learns a frame's colour
-  after its depth): the node runs Sections 3-4 before the colour image arrives, and must see
-  what ``endeff process`` sees.
+  frame when a third of the image changed by ``COLOR_MIN_STEP`` or more than
+  ``COLOR_OUTSIDE_FRACTION`` of what holds no entity (floor, walls, beyond the box) did: the
+  light changed, or the camera moved (while a pan settles, every texture edge stirs).
+  Neither counts the pixels whose depth turned farther: what left them (a person walking
+  away, uncovering the wall) changed their colour, not the light. Without colour (none in
+  the stream, or this frame's was lost) depth alone decides. What stays static in depth but
+  changes in colour (a screen showing a film, a shadow cast on a table) is kept like a
+  mover. The evidence is one frame late (:meth:`BackgroundModel.observe_color` learns a
+  frame's colour after its depth): the node runs Sections 3-4 before the colour image
+  arrives, and must see what ``endeff process`` sees. So it holds only where the surface of
+  that frame is still seen: not where the depth turned farther since, nor where there was
+  no reading then and the background is seen now (a runner's colour, one frame later, would
+  otherwise fall on the shelf they passed and move it).
 - **Certified static**: pixels dropped for ``STATIC_S`` at a steady depth stay dropped when
   a moving component joins them (the large edge step joins a person to the furniture beside
   them), until something changes in front of them or they turn farther.
@@ -78,7 +83,10 @@ background model removes what never moved, with the person present from the firs
   the background is re-learnt from the current frame. A person moving in front of a learnt
   background changes pixels mostly in one direction (nearer where they are; farther only
   where they stood at the start and for a few frames), a pan changes both at every depth
-  edge. Tracks are not touched (the tracker keeps its ids). While the camera brakes, a third
+  edge. A person close to the camera who walks away changes as many pixels both ways, so
+  the depth is asked only in frames without colour evidence: with it, floor and walls stood
+  still in the colour image, and the camera did not move. Tracks are not touched (the
+  tracker keeps its ids). While the camera brakes, a third
   of that fraction re-learns again during the learning time that follows (the turn's last
   degree would otherwise leave every edge of the furniture "changed"). The tracks that sat
   on a moving component for ``CARRY_AFTER_S`` when the turn began keep their components
@@ -318,6 +326,7 @@ class BackgroundModel:
         self._learn_until = t + params.background_learn_s
         self._settling = False
         self._greys = []
+        self._evidence = None
 
     def _remember(self, stamp_ns: int, depth: npt.NDArray[np.float32],
                   valid: npt.NDArray[np.bool_], candidate: npt.NDArray[np.bool_],
@@ -357,13 +366,18 @@ class BackgroundModel:
         counts = np.bincount(diff.ravel(), minlength=256)
         median = int(np.searchsorted(np.cumsum(counts), diff.size / 2))
         stirred = diff > max(COLOR_MIN_STEP, COLOR_NOISE_K * 1.4826 * median)
-        if (np.count_nonzero(stirred) > COLOR_GLOBAL_FRACTION * diff.size
-                or np.count_nonzero(stirred & outside)
+        # Where the depth turned farther, something left: its colour change is not the
+        # surface's now seen. No reading then counts as farther than anything, as for the
+        # background itself (letting such pixels stir kept more furniture: docs/results.md).
+        left = depth > reference[2] + margin
+        # A change of the whole image is judged on a fixed step: the noise-relative one rises
+        # with it (a pan's every pixel changes, and the median with them).
+        broad = (diff > COLOR_MIN_STEP) & ~left
+        if (np.count_nonzero(broad) > COLOR_GLOBAL_FRACTION * diff.size
+                or np.count_nonzero(broad & outside)
                 > COLOR_OUTSIDE_FRACTION * np.count_nonzero(outside)):
             return  # the light changed or the camera moved: nothing to tell
-        # No reading then counts as farther than anything, as for the background itself
-        # (letting such pixels stir kept more furniture: docs/results.md).
-        self._evidence = stirred & ~(depth > reference[2] + margin)
+        self._evidence = stirred & ~left
 
     def foreground(self, depth: npt.NDArray[np.floating], candidate: npt.NDArray[np.bool_],
                    stamp_ns: int, params: EndeffParams, *,
@@ -398,10 +412,22 @@ class BackgroundModel:
         nearer = known & (d < bg - margin)
         farther = known & (d > bg + margin)
         stirred, self._evidence = self._evidence, None
+        if stirred is not None:
+            # The evidence is the frame before's, and holds for the surface that was there: not
+            # where the depth has turned farther since (what stirred has left: a runner passing
+            # a shelf) nor where there was no reading and the background is seen now (the
+            # sensor's shadow beside a moving person, whose colour stirred).
+            prev, prev_margin = self._last[2], self._last[3]
+            stirred = stirred & ~((prev > 0) & (d > prev + prev_margin)) & ~((prev <= 0) & known
+                                                                            & ~nearer)
         self._remember(stamp_ns, d, valid, candidate, params)
 
         n_known = int(np.count_nonzero(known))
-        if n_known >= MIN_KNOWN_FRACTION * d.size:
+        # Camera motion is judged from the depth only when the colour has nothing to say: with
+        # colour evidence, floor, walls and what lies beyond the box stood still in the colour
+        # image (a person close to the camera walking away changes as many pixels nearer and
+        # farther as a pan does).
+        if n_known >= MIN_KNOWN_FRACTION * d.size and stirred is None:
             recent_far = farther | (self._far_t > t - RECENT_FAR_S)
             f = params.background_camera_motion_fraction * n_known
             if self._settling and t < self._learn_until:
