@@ -88,3 +88,17 @@ def test_plane_area_is_counted_per_connected_stretch() -> None:
     paint(depth, 0.2, 1.2, -0.35, 0.35, 2.6)  # cabinet front, 0.7 m^2, not touching the person
     points = cloud(depth)
     assert near(points, 2.6) == near(cloud(depth, wall_min_area=0.0), 2.6)
+
+
+def test_a_slab_through_a_body_seen_edge_on_is_no_wall() -> None:
+    """A body whose parts lie at different depths (a person bending towards the camera) has
+    no frontal plane holding much of it, but a vertical slab through its middle, seen
+    edge-on, holds a band of every part; each of those pixels views the slab at a grazing
+    angle, and their footprints add up to more than a wall's 1 m^2. Projected onto the slab
+    they cover a thin curve: not a wall, and every point of the body stays."""
+    depth = empty()
+    for i, z in enumerate([2.6, 3.0, 2.7, 2.9, 2.65, 2.95, 2.75, 2.85, 2.6, 3.0]):
+        y0 = -1.0 + 0.2 * i
+        paint(depth, -0.08, 0.08, y0 - 0.05, y0 + 0.25, z)  # overlapping: one stretch
+    points = cloud(depth)
+    assert len(points) == len(cloud(depth, wall_min_area=0.0)) > 1000

@@ -345,7 +345,8 @@ def wall_points(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
         image.reshape(-1)[pixels] = 1
         _, labels = cv2.connectedComponents(image, connectivity=8, ltype=cv2.CV_32S)
         part = labels.reshape(-1)[pixels]
-        area = np.bincount(part, weights=_footprints(pts[on], normal, pixel_area))
+        area = np.minimum(np.bincount(part, weights=_footprints(pts[on], normal, pixel_area)),
+                          _occupied_area(pts[on], normal, part))
         gone = on[(area >= params.wall_min_area)[part]]
         if not len(gone):
             break
@@ -363,6 +364,24 @@ def _footprints(points: npt.NDArray[np.float64], normal: npt.NDArray[np.float64]
     return pixel_area * points[:, 2] ** 2 / np.maximum(cos, 0.2)
 
 
+def _occupied_area(points: npt.NDArray[np.float64], normal: npt.NDArray[np.float64],
+                   part: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
+    """Per label of ``part`` (N,), the area (m^2) of the ``_WALL_CELL`` cells of the plane
+    with ``normal`` that its ``points`` (N, 3), projected onto the plane, occupy.
+
+    The footprints of :func:`_footprints` measure a surface that lies in the plane; a slab
+    through a body seen edge-on (a bending person's side) holds the body's front surface
+    across its thickness, each pixel at a grazing angle, and their footprints add up to a
+    wall's. Projected onto the plane those points cover a thin curve."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(normal, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    cells = np.floor(np.stack([points @ e1, points @ e2], axis=1) / _WALL_CELL).astype(np.int64)
+    keys = np.unique(np.stack([part, cells[:, 0], cells[:, 1]], axis=1), axis=0)
+    return np.bincount(keys[:, 0], minlength=int(part.max()) + 1) * _WALL_CELL ** 2
+
+
 #: Planes :func:`wall_points` looks for (a wall behind the person and one beside).
 _WALL_PLANES = 2
 #: A plane whose area the sample puts below this share of ``wall_min_area`` is not checked on
@@ -370,6 +389,8 @@ _WALL_PLANES = 2
 _WALL_SAMPLE_SHARE = 0.5
 #: Depth-noise term of the wall tolerance, metres per square metre of depth.
 _WALL_NOISE_Z2 = 0.005
+#: Cell (m) of the plane in which :func:`wall_points` counts occupied area.
+_WALL_CELL = 0.1
 
 
 #: Pixels this close to the floor (metres) do not connect the static background's
