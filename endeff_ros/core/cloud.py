@@ -345,9 +345,16 @@ def wall_points(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
         image.reshape(-1)[pixels] = 1
         _, labels = cv2.connectedComponents(image, connectivity=8, ltype=cv2.CV_32S)
         part = labels.reshape(-1)[pixels]
-        area = np.minimum(np.bincount(part, weights=_footprints(pts[on], normal, pixel_area)),
-                          _occupied_area(pts[on], normal, part))
-        gone = on[(area >= params.wall_min_area)[part]]
+        area = np.bincount(part, weights=_footprints(pts[on], normal, pixel_area))
+        big = area >= params.wall_min_area
+        # ... and, where grazing views made up half of that, the plane's cells they cover.
+        seen = np.bincount(part, weights=pixel_area * pts[on][:, 2] ** 2, minlength=len(area))
+        check = big & (area > 2 * seen)
+        mine = check[part]
+        if mine.any():
+            cells = _occupied_area(pts[on][mine], normal, part[mine], len(area))
+            big &= ~check | (cells >= params.wall_min_area)
+        gone = on[big[part]]
         if not len(gone):
             break
         out[left[gone]] = True
@@ -365,9 +372,9 @@ def _footprints(points: npt.NDArray[np.float64], normal: npt.NDArray[np.float64]
 
 
 def _occupied_area(points: npt.NDArray[np.float64], normal: npt.NDArray[np.float64],
-                   part: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
-    """Per label of ``part`` (N,), the area (m^2) of the ``_WALL_CELL`` cells of the plane
-    with ``normal`` that its ``points`` (N, 3), projected onto the plane, occupy.
+                   part: npt.NDArray[np.int64], n: int) -> npt.NDArray[np.float64]:
+    """Per label 0..n-1 of ``part`` (N,), the area (m^2) of the ``_WALL_CELL`` cells of the
+    plane with ``normal`` that its ``points`` (N, 3), projected onto the plane, occupy.
 
     The footprints of :func:`_footprints` measure a surface that lies in the plane; a slab
     through a body seen edge-on (a bending person's side) holds the body's front surface
@@ -377,9 +384,19 @@ def _occupied_area(points: npt.NDArray[np.float64], normal: npt.NDArray[np.float
     e1 = np.cross(normal, helper)
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(normal, e1)
-    cells = np.floor(np.stack([points @ e1, points @ e2], axis=1) / _WALL_CELL).astype(np.int64)
-    keys = np.unique(np.stack([part, cells[:, 0], cells[:, 1]], axis=1), axis=0)
-    return np.bincount(keys[:, 0], minlength=int(part.max()) + 1) * _WALL_CELL ** 2
+    u, v = points @ (e1 / _WALL_CELL), points @ (e2 / _WALL_CELL)
+    c0, c1 = (u - u.min()).astype(np.int64), (v - v.min()).astype(np.int64)
+    # An occupancy grid per label (no sort: a wall holds tens of thousands of points).
+    present = np.bincount(part, minlength=n) > 0
+    labels = np.flatnonzero(present)
+    index = (np.cumsum(present) - 1)[part]
+    s0, s1 = int(c0.max()) + 1, int(c1.max()) + 1
+    grid = np.zeros(len(labels) * s0 * s1, dtype=bool)
+    grid[(index * s0 + c0) * s1 + c1] = True
+    per_label = np.bincount(np.flatnonzero(grid) // (s0 * s1), minlength=len(labels))
+    out = np.zeros(n)
+    out[labels] = per_label * _WALL_CELL ** 2
+    return out
 
 
 #: Planes :func:`wall_points` looks for (a wall behind the person and one beside).
