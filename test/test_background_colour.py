@@ -27,7 +27,7 @@ from endeff_ros.core.background import BackgroundModel, strided_grey
 from endeff_ros.core.single_frame import estimate_frame
 from endeff_ros.core.tracker import Tracker
 from endeff_ros.core.types import KINECT_640 as K
-from endeff_ros.core.types import RGBDFrame
+from endeff_ros.core.types import Intrinsics, RGBDFrame
 
 PERSON_X = -0.5
 BLOCK = 8
@@ -224,3 +224,26 @@ def test_strided_grey_of_colour_and_mono():
     assert grey.shape == (2, 3) and grey.dtype == np.uint8
     assert grey[0, 0] == 200 and grey[1, 2] == 0
     assert np.array_equal(strided_grey(color[:, :, 0], (2, 3)), grey)
+
+
+def test_a_new_image_size_restarts_learning_without_stale_evidence():
+    """The camera's resolution changes mid-stream (a driver reconfigured) and the first
+    frame of the new size comes without its colour: the background is learnt afresh, and
+    the colour evidence of the last frame of the old size is not applied to the new one."""
+    model = BackgroundModel()
+    for k in range(8):
+        f = still_person_frame(k)
+        estimate_frame(f, PARAMS, background=model)
+        model.observe_color(f.color, f.stamp_ns)
+    half = Intrinsics(K.fx / 2, K.fy / 2, K.cx / 2, K.cy / 2, K.width // 2, K.height // 2)
+    for k in range(8, 14):
+        f = still_person_frame(k)
+        small = RGBDFrame(f.stamp_ns, f.frame_id, np.ascontiguousarray(f.depth[::2, ::2]),
+                          half, np.ascontiguousarray(f.color[::2, ::2]))
+        est = estimate_frame(small, PARAMS, background=model)
+        if k > 8:  # the first one's colour image was lost
+            model.observe_color(small.color, small.stamp_ns)
+        assert model.learning
+        if k <= 10:  # no colour evidence of the new size yet: everything is kept
+            assert points_near(est.points, PERSON_X, PERSON_Z) > 50
+    assert model.background.shape == (K.height // 4, K.width // 4)
