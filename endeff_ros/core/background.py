@@ -100,7 +100,7 @@ stamps; a stamp going back (a bag loop) does not move the model's clock back.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import cv2
 import numpy as np
@@ -167,6 +167,23 @@ COLOR_OUTSIDE_FRACTION = 0.01
 #: Certified-static pixels within this many pixels (strided image) of a stirred one are
 #: released.
 COLOR_RELEASE_PX = 4
+
+
+def _margin(depth: npt.NDArray[np.float32], base: float) -> npt.NDArray[np.float32]:
+    """The background's depth margin at ``depth``: ``base`` (``background_margin``) plus the
+    noise term ``NOISE_Z2 * z**2``."""
+    return np.float32(base) + np.float32(NOISE_Z2) * depth * depth
+
+
+class _Taken(NamedTuple):
+    """What :meth:`BackgroundModel.observe_color` and the next frame need of the frame
+    :meth:`BackgroundModel.foreground` took."""
+
+    stamp_ns: int
+    t: float  # model time
+    depth: npt.NDArray[np.float32]  # strided, 0 where there is no reading
+    base_margin: float  # background_margin then
+    outside: npt.NDArray[np.bool_]  # readings that hold no entity (floor, walls, beyond)
 
 
 def depth_components(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_],
@@ -276,7 +293,7 @@ class BackgroundModel:
         self._learn_until = 0.0
         # (time, strided grey, strided depth) of the recent frames
         self._greys: list[tuple[float, npt.NDArray[np.uint8], npt.NDArray[np.float32]]] = []
-        self._last: tuple | None = None  # what observe_color needs of the last frame
+        self._last: _Taken | None = None  # the last frame foreground() took
         self._evidence: npt.NDArray[np.bool_] | None = None  # stirred pixels, for the next
         self._last_raw: float | None = None
         self._offset = 0.0
@@ -331,9 +348,9 @@ class BackgroundModel:
     def _remember(self, stamp_ns: int, depth: npt.NDArray[np.float32],
                   valid: npt.NDArray[np.bool_], candidate: npt.NDArray[np.bool_],
                   params: EndeffParams) -> None:
-        """Keep what :meth:`observe_color` needs of the frame :meth:`foreground` took."""
-        margin = np.float32(params.background_margin) + np.float32(NOISE_Z2) * depth * depth
-        self._last = (stamp_ns, self._t, depth, margin, valid & ~candidate)
+        """Keep what :meth:`observe_color` and the next frame need of the frame taken."""
+        self._last = _Taken(stamp_ns, self._t, depth, params.background_margin,
+                            valid & ~candidate)
 
     def observe_color(self, color: npt.NDArray[np.uint8] | None, stamp_ns: int) -> None:
         """Learn the colour motion of the frame :meth:`foreground` just took (the same stamp):
@@ -351,9 +368,9 @@ class BackgroundModel:
         """
         self._evidence = None
         last = self._last
-        if color is None or last is None or last[0] != stamp_ns:
+        if color is None or last is None or last.stamp_ns != stamp_ns:
             return
-        _, t, depth, margin, outside = last
+        t, depth, outside = last.t, last.depth, last.outside
         grey = strided_grey(color, depth.shape)
         greys = self._greys
         while len(greys) >= 2 and greys[1][0] <= t - COLOR_LAG_S:
@@ -369,7 +386,7 @@ class BackgroundModel:
         # Where the depth turned farther, something left: its colour change is not the
         # surface's now seen. No reading then counts as farther than anything, as for the
         # background itself (letting such pixels stir kept more furniture: docs/results.md).
-        left = depth > reference[2] + margin
+        left = depth > reference[2] + _margin(depth, last.base_margin)
         # A change of the whole image is judged on a fixed step: the noise-relative one rises
         # with it (a pan's every pixel changes, and the median with them).
         broad = (diff > COLOR_MIN_STEP) & ~left
@@ -408,7 +425,7 @@ class BackgroundModel:
             return candidate.copy()
         bg = self._bg
         known = valid & (bg > 0)
-        margin = np.float32(params.background_margin) + np.float32(NOISE_Z2) * bg * bg
+        margin = _margin(bg, params.background_margin)
         nearer = known & (d < bg - margin)
         farther = known & (d > bg + margin)
         stirred, self._evidence = self._evidence, None
@@ -417,9 +434,9 @@ class BackgroundModel:
             # where the depth has turned farther since (what stirred has left: a runner passing
             # a shelf) nor where there was no reading and the background is seen now (the
             # sensor's shadow beside a moving person, whose colour stirred).
-            prev, prev_margin = self._last[2], self._last[3]
-            stirred = stirred & ~((prev > 0) & (d > prev + prev_margin)) & ~((prev <= 0) & known
-                                                                            & ~nearer)
+            prev = self._last.depth
+            stirred = (stirred & ~((prev > 0) & (d > prev + _margin(prev, self._last.base_margin)))
+                       & ~((prev <= 0) & known & ~nearer))
         self._remember(stamp_ns, d, valid, candidate, params)
 
         n_known = int(np.count_nonzero(known))

@@ -345,14 +345,15 @@ def wall_points(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
         image.reshape(-1)[pixels] = 1
         _, labels = cv2.connectedComponents(image, connectivity=8, ltype=cv2.CV_32S)
         part = labels.reshape(-1)[pixels]
-        area = np.bincount(part, weights=_footprints(pts[on], normal, pixel_area))
+        inliers = pts[on]
+        area = np.bincount(part, weights=_footprints(inliers, normal, pixel_area))
         big = area >= params.wall_min_area
         # ... and, where grazing views made up half of that, the plane's cells they cover.
-        seen = np.bincount(part, weights=pixel_area * pts[on][:, 2] ** 2, minlength=len(area))
+        seen = np.bincount(part, weights=pixel_area * inliers[:, 2] ** 2, minlength=len(area))
         check = big & (area > 2 * seen)
         mine = check[part]
         if mine.any():
-            cells = _occupied_area(pts[on][mine], normal, part[mine], len(area))
+            cells = _occupied_area(inliers[mine], normal, part[mine], len(area))
             big &= ~check | (cells >= params.wall_min_area)
         gone = on[big[part]]
         if not len(gone):
