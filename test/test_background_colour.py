@@ -64,14 +64,18 @@ def still_person_frame(k: int, *, sway: bool = True, light: int = 0,
                      color=color)
 
 
-def _run(n: int, **kw) -> tuple[BackgroundModel, list[tuple[bool, int, int]]]:
-    """(learning, person points, chair points) per frame of ``n`` frames."""
+def _run(n: int, *, colour_first: bool = True,
+         **kw) -> tuple[BackgroundModel, list[tuple[bool, int, int]]]:
+    """(learning, person points, chair points) per frame of ``n`` frames. ``colour_first``:
+    the background is given each frame's colour with its depth (as ``endeff process`` and
+    the tracker do); otherwise only afterwards (:meth:`BackgroundModel.observe_color`)."""
     model = BackgroundModel()
     out = []
     for k in range(n):
         args = {name: value(k) if callable(value) else value for name, value in kw.items()}
         f = still_person_frame(k, **args)
-        est = estimate_frame(f, PARAMS, background=model)
+        given = f if colour_first else RGBDFrame(f.stamp_ns, f.frame_id, f.depth, f.intrinsics)
+        est = estimate_frame(given, PARAMS, background=model)
         model.observe_color(f.color, f.stamp_ns)
         out.append((model.learning, points_near(est.points, PERSON_X, PERSON_Z),
                     points_near(est.points, CHAIR_X, CHAIR_Z)))
@@ -94,10 +98,20 @@ def test_without_colour_motion_the_still_person_is_background():
 
 def test_learning_with_colour_reports_only_what_stirs():
     """While the background is learnt nothing moved in depth yet, but the colour shows
-    what moves: the chair is not reported once there is colour evidence, the person is."""
+    what moves: the chair is not reported once there is colour evidence, the person is.
+    While learning, a frame's own colour decides: from the second frame on (the first has
+    nothing to compare with)."""
     _, out = _run(15)
     assert all(learning for learning, _, _ in out)
-    # The first two frames: nothing to compare with (colour evidence is the frame before's).
+    assert out[0][1] > 300 and out[0][2] > 50
+    assert all(person > 300 and chair == 0 for _, person, chair in out[1:])
+
+
+def test_colour_given_only_after_the_depth_is_one_frame_late_while_learning():
+    """The same frames with each colour image given only after its depth: the second frame
+    has no evidence yet and keeps the chair (why the node waits for the colour while the
+    background learns: Tracker.estimate_wants_color)."""
+    _, out = _run(15, colour_first=False)
     assert all(person > 300 and chair > 50 for _, person, chair in out[:2])
     assert all(person > 300 and chair == 0 for _, person, chair in out[2:])
 
@@ -118,17 +132,23 @@ def test_camera_shaking_in_colour_only_is_no_motion():
 
 def test_tracker_takes_colour_motion_also_when_depth_comes_first():
     """The node runs Sections 3-4 on a depth image before its colour partner arrives and
-    passes that estimate to the update: the tracker then sees the colour motion just as when
-    it estimates the whole frame itself (`endeff process`), and keeps the still person."""
+    passes that estimate to the update, except while the tracker wants the colour first
+    (the background learning): the tracker then sees the colour motion just as when it
+    estimates the whole frame itself (`endeff process`), and keeps the still person."""
     whole, early = Tracker(PARAMS), Tracker(PARAMS)
+    waited = 0
     for k in range(40):
         f = still_person_frame(k)
         a = whole.update(f)
-        depth_only = RGBDFrame(f.stamp_ns, f.frame_id, f.depth, f.intrinsics)
-        b = early.update(f, estimate=early.estimate(depth_only))
+        if early.estimate_wants_color:
+            waited += 1
+            b = early.update(f)
+        else:
+            depth_only = RGBDFrame(f.stamp_ns, f.frame_id, f.depth, f.intrinsics)
+            b = early.update(f, estimate=early.estimate(depth_only))
         assert np.array_equal(a.estimate.points, b.estimate.points)
         assert [t.id for t in a.tracks] == [t.id for t in b.tracks]
-    assert not whole.background.learning
+    assert not whole.background.learning and 0 < waited < 40  # both ways were taken
     assert points_near(a.estimate.points, PERSON_X, PERSON_Z) > 300
     assert points_near(a.estimate.points, CHAIR_X, CHAIR_Z) == 0
 

@@ -542,3 +542,39 @@ def test_empty_frame_id_is_warned_about(harness):
     h.pub['depth'].publish(image_msg(mm, '16UC1', 16_000_000_000, ''))
     assert h.wait_clouds(1)
     assert h.node.stats.warnings.get('empty_frame_id') == 1 and h.clouds[0].header.frame_id == ''
+
+
+class EarlyTracker(FakeTracker):
+    """A fake tracker whose Sections 3-4 may run early: records the frames it estimated."""
+
+    estimate_wants_color = True  # as a real tracker's while its background learns
+
+    def __init__(self, params: EndeffParams) -> None:
+        super().__init__(params)
+        self.estimated: list[int] = []
+
+    def estimate(self, frame: RGBDFrame) -> FrameEstimate:
+        self.estimated.append(frame.stamp_ns)
+        return self.update(frame).estimate
+
+
+def test_no_early_estimate_while_the_tracker_wants_the_colour(ros_context):
+    """The worker runs a depth image's Sections 3-4 before its colour partner arrives only
+    when the tracker does not want the colour first (its background is learning: the
+    frame's own colour motion decides, as in ``endeff process``)."""
+    from endeff_ros.ros.node import EndeffNode
+
+    node = EndeffNode(tracker_factory=EarlyTracker, namespace='/early')
+    try:
+        def prepare(stamp: int) -> None:
+            mm = np.full((H, W), 1500, np.uint16)
+            node._prepare(image_msg(mm, '16UC1', stamp, FRAME_ID),
+                          info_msg(stamp, FRAME_ID, W, H))
+
+        prepare(1_000_000_000)
+        assert node.tracker.estimated == []
+        node.tracker.estimate_wants_color = False
+        prepare(2_000_000_000)
+        assert node.tracker.estimated == [2_000_000_000]
+    finally:
+        node.destroy_node()

@@ -54,19 +54,22 @@ background model removes what never moved, with the person present from the firs
   away, uncovering the wall) changed their colour, not the light. Without colour (none in
   the stream, or this frame's was lost) depth alone decides. What stays static in depth but
   changes in colour (a screen showing a film, a shadow cast on a table) is kept like a
-  mover. The evidence is one frame late (:meth:`BackgroundModel.observe_color` learns a
-  frame's colour after its depth): the node runs Sections 3-4 before the colour image
-  arrives, and must see what ``endeff process`` sees. So it holds only where the surface of
-  that frame is still seen: not where the depth turned farther since, nor where there was
-  no reading then and the background is seen now (a runner's colour, one frame later, would
-  otherwise fall on the shelf they passed and move it).
+  mover. After learning the evidence is one frame late (:meth:`BackgroundModel.observe_color`
+  learns a frame's colour after its depth): the node runs Sections 3-4 before the colour
+  image arrives, and must see what ``endeff process`` sees. So it holds only where the
+  surface of that frame is still seen: not where the depth turned farther since, nor where
+  there was no reading then and the background is seen now (a runner's colour, one frame
+  later, would otherwise fall on the shelf they passed and move it).
 - **Certified static**: pixels dropped for ``STATIC_S`` at a steady depth stay dropped when
   a moving component joins them (the large edge step joins a person to the furniture beside
   them), until something changes in front of them or they turn farther.
 - **Learning**: for ``background_learn_s`` after the start (and after a re-learn) no depth
-  change can show yet. With colour evidence only the components that stir are kept (from the
-  third frame: colour evidence is the frame before's, and the first has nothing to compare
-  with); without it everything is kept. Every frame that keeps everything keeps the
+  change can show yet. With colour evidence only the components that stir are kept, and
+  the evidence is the frame's own colour (:meth:`foreground`'s ``color``; the node waits for
+  it then, :attr:`learning`): from the second frame on, the first has nothing to compare
+  with. Late evidence would leave the second frame without any, and the furniture in it
+  (docs/results.md: furnished rooms' excess FPR +0.038 -> +0.026 on dev). Without colour
+  everything is kept. Every frame that keeps everything keeps the
   furniture's false positives (1 s of 3 s bags kept furnished rooms at FPR 0.25-0.29 against
   0.01-0.17 empty), but dropping at once drops a person present from frame 0 until they have
   moved by more than the margin; a moving person's changed pixels survive the opening within
@@ -296,6 +299,7 @@ class BackgroundModel:
         self._last: _Taken | None = None  # the last frame foreground() took
         self._evidence: npt.NDArray[np.bool_] | None = None  # stirred pixels, for the next
         self._last_raw: float | None = None
+        self._seen_color: int | None = None  # stamp of the last colour taken
         self._offset = 0.0
         self._t = 0.0
 
@@ -308,6 +312,12 @@ class BackgroundModel:
     def learning(self) -> bool:
         """True while everything is still kept (the first ``background_learn_s``)."""
         return self._bg is None or self._t < self._learn_until
+
+    @property
+    def wants_color(self) -> bool:
+        """True when the next frame's :meth:`foreground` should be given its colour image:
+        while learning (or with a re-learn asked for), the frame's own colour decides."""
+        return self._reset_requested or self.learning
 
     @property
     def background(self) -> npt.NDArray[np.float32] | None:
@@ -366,10 +376,19 @@ class BackgroundModel:
         Colour comes after the depth's Sections 3-4 (the node starts those before the colour
         image arrives), hence the one frame's delay: every caller sees the same evidence.
         """
-        self._evidence = None
         last = self._last
         if color is None or last is None or last.stamp_ns != stamp_ns:
+            self._evidence = None
             return
+        if self._seen_color == stamp_ns:
+            return  # foreground() took this colour with its depth
+        self._evidence = self._color_evidence(color, last)
+
+    def _color_evidence(self, color: npt.NDArray[np.uint8],
+                        last: _Taken) -> npt.NDArray[np.bool_] | None:
+        """The stirred pixels of ``color``, the colour of the frame ``last`` (see
+        :meth:`observe_color`), or None."""
+        self._seen_color = last.stamp_ns
         t, depth, outside = last.t, last.depth, last.outside
         grey = strided_grey(color, depth.shape)
         greys = self._greys
@@ -378,7 +397,7 @@ class BackgroundModel:
         reference = greys[0] if greys else None
         greys.append((t, grey, depth))
         if reference is None:
-            return
+            return None
         diff = cv2.absdiff(grey, reference[1])
         counts = np.bincount(diff.ravel(), minlength=256)
         median = int(np.searchsorted(np.cumsum(counts), diff.size / 2))
@@ -393,12 +412,13 @@ class BackgroundModel:
         if (np.count_nonzero(broad) > COLOR_GLOBAL_FRACTION * diff.size
                 or np.count_nonzero(broad & outside)
                 > COLOR_OUTSIDE_FRACTION * np.count_nonzero(outside)):
-            return  # the light changed or the camera moved: nothing to tell
-        self._evidence = stirred & ~left
+            return None  # the light changed or the camera moved: nothing to tell
+        return stirred & ~left
 
     def foreground(self, depth: npt.NDArray[np.floating], candidate: npt.NDArray[np.bool_],
                    stamp_ns: int, params: EndeffParams, *,
-                   low: npt.NDArray[np.bool_] | None = None) -> npt.NDArray[np.bool_]:
+                   low: npt.NDArray[np.bool_] | None = None,
+                   color: npt.NDArray[np.uint8] | None = None) -> npt.NDArray[np.bool_]:
         """Learn from one frame and return the pixels of ``candidate`` that are foreground.
 
         ``depth`` (H, W) metres (0, NaN, inf: no reading; the caller zeroes readings beyond the
@@ -407,8 +427,11 @@ class BackgroundModel:
         and off the floor; ``stamp_ns`` the frame's stamp; ``low`` (H, W) optional, the
         candidate pixels just above the floor, which do not connect components (the floor's
         noisy remnants would join a person's feet to a chair's legs) and are kept next to a
-        kept pixel. Returns an (H, W) mask, a subset of ``candidate``. The colour motion
-        used is what :meth:`observe_color` saw in the frame before.
+        kept pixel; ``color`` optional, the frame's registered colour image (as for
+        :meth:`observe_color`). Returns an (H, W) mask, a subset of ``candidate``. While
+        learning, the colour motion used is this frame's own (``color``; :meth:`observe_color`
+        then does nothing for this stamp); after learning it is what :meth:`observe_color`
+        saw in the frame before, and ``color`` is not used.
         """
         d = np.nan_to_num(np.asarray(depth, dtype=np.float32), nan=0.0, posinf=0.0,
                           neginf=0.0)
@@ -421,6 +444,8 @@ class BackgroundModel:
             self._reset_requested = False
             self._learn(d, valid, t, params)
             self._remember(stamp_ns, d, valid, candidate, params)
+            if color is not None:  # the first grey image (nothing to compare it with yet)
+                self._evidence = self._color_evidence(color, self._last)
             self._labels, _ = depth_components(d, candidate, stride)
             return candidate.copy()
         bg = self._bg
@@ -438,6 +463,10 @@ class BackgroundModel:
             stirred = (stirred & ~((prev > 0) & (d > prev + _margin(prev, self._last.base_margin)))
                        & ~((prev <= 0) & known & ~nearer))
         self._remember(stamp_ns, d, valid, candidate, params)
+        if color is not None and t < self._learn_until:
+            # Learning: this frame's own colour decides (module docstring), and serves the
+            # next frame as the evidence observe_color would have given it.
+            stirred = self._evidence = self._color_evidence(color, self._last)
 
         n_known = int(np.count_nonzero(known))
         # Camera motion is judged from the depth only when the colour has nothing to say: with

@@ -247,13 +247,15 @@ def _voxel_means(cols: Columns, size: float) -> npt.NDArray[np.float64]:
 def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
                      params: EndeffParams, *, floor: FloorPlane | None = None,
                      background: BackgroundModel | None = None, stamp_ns: int = 0,
+                     color: npt.NDArray[np.uint8] | None = None,
                      ) -> tuple[npt.NDArray[np.float64], FloorPlane | None]:
     """Section 3 in one call: back-project, crop to the box, drop the floor, drop the static
     background, voxelise.
 
     ``floor`` may give a known plane; otherwise it is fitted when ``params.floor_removal``.
     ``background``: a :class:`~endeff_ros.core.background.BackgroundModel` that learns from
-    this frame (stamped ``stamp_ns``) and keeps only the parts of the box that moved.
+    this frame (stamped ``stamp_ns``, with its registered ``color`` image if given) and keeps
+    only the parts of the box that moved.
     Returns the (N, 3) foreground points and the floor plane used (or None).
     """
     z_image, valid = _valid_pixels(depth, intrinsics, params.pixel_stride,
@@ -284,7 +286,8 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
             low = np.zeros(valid.shape, dtype=bool)
             low[valid] = keep & (height < FLOOR_BAND)
         z_image = np.where(z_image <= MAX_RANGE_M, z_image, 0)  # NaN compares False: 0 too
-        keep = background.foreground(z_image, candidate, stamp_ns, params, low=low)[valid]
+        keep = background.foreground(z_image, candidate, stamp_ns, params, low=low,
+                                     color=color)[valid]
     x, y, z = x[keep], y[keep], z[keep]
     if params.voxel_size <= 0 or len(z) == 0:
         return np.stack([x, y, z], axis=1), floor

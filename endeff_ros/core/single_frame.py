@@ -80,7 +80,8 @@ def estimate_frame(frame: RGBDFrame, params: EndeffParams | None = None, *,
     params = params or EndeffParams()
     timer = _StageTimer()
     points, floor = foreground_cloud(frame.depth, frame.intrinsics, params, floor=floor,
-                                     background=background, stamp_ns=frame.stamp_ns)
+                                     background=background, stamp_ns=frame.stamp_ns,
+                                     color=frame.color)
     timer.lap('cloud')
     estimate = estimate_points(points, params, timer=timer)
     if params.drop_cut_ends:

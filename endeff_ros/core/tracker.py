@@ -140,11 +140,20 @@ class Tracker:
 
     def estimate(self, frame: RGBDFrame) -> FrameEstimate:
         """Sections 3-4 of ``frame`` with this tracker's floor: the first step of
-        :meth:`update`, which a caller may run early (depth needs no colour) and pass on."""
+        :meth:`update`, which a caller may run early (depth needs no colour, except while
+        :attr:`estimate_wants_color`) and pass on."""
         if not self.params.background:
             self.background.reset()  # learnt afresh if it is turned on again
         return estimate_frame(frame, self.params, floor=self._floor,
                               background=self.background if self.params.background else None)
+
+    @property
+    def estimate_wants_color(self) -> bool:
+        """Whether :meth:`estimate` of the next frame should wait for its colour image: while
+        the static background learns, the frame's own colour motion decides what is static
+        (:attr:`~endeff_ros.core.background.BackgroundModel.wants_color`); a caller running
+        Sections 3-4 early without it would see another foreground than ``endeff process``."""
+        return self.params.background and self.background.wants_color
 
     def flow(self, color: npt.NDArray[np.uint8] | None,
              intrinsics: Intrinsics) -> RoiFlow | None:

@@ -282,7 +282,9 @@ class EndeffNode(Node):
         tracker's :meth:`~endeff_ros.core.tracker.Tracker.estimate`); :meth:`_process` uses
         the result if its set has that depth image and nothing changed in between."""
         estimate_fn = getattr(self.tracker, 'estimate', None)
-        if estimate_fn is None or not self.scheduler.begin_estimate(depth):
+        # While the static background learns, the frame's own colour decides: no early work.
+        if (estimate_fn is None or getattr(self.tracker, 'estimate_wants_color', False)
+                or not self.scheduler.begin_estimate(depth)):
             return
         t0 = time.perf_counter()
         early = None
