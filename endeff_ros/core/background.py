@@ -45,11 +45,15 @@ background model removes what never moved, with the person present from the firs
   was, the lamp now seen behind it is not what moved), are *stirred*; a component with
   ``COLOR_MIN_FRACTION`` of its pixels stirred moves, ten times the depth's fraction, since
   what colour sees and depth does not (a shadow, a screen) is spread thin over a surface.
-  Certified-static pixels (below) within ``COLOR_RELEASE_PX`` of a stirred pixel are
-  released: a person certified while standing still moves again. No colour evidence in a
-  frame when a third of the image changed by ``COLOR_MIN_STEP`` or more than
-  ``COLOR_OUTSIDE_FRACTION`` of what holds no entity (floor, walls, beyond the box) did: the
-  light changed, or the camera moved (while a pan settles, every texture edge stirs).
+  Such a component is held (``HOLD_S``) only where the same surface stirred before within
+  ``COLOR_CONFIRM_S``: the outline of a runner who has just uncovered a lamp stirs a dozen
+  of its pixels in one frame (colour and depth edges differ by a pixel), and a hold would
+  keep the lamp for half a second. Certified-static pixels (below) within
+  ``COLOR_RELEASE_PX`` of a stirred pixel are released: a person certified while standing
+  still moves again. No colour evidence in a frame when a third of the image changed by
+  ``COLOR_MIN_STEP`` or more than ``COLOR_OUTSIDE_FRACTION`` of what holds no entity (floor,
+  walls, beyond the box) did: the light changed, or the camera moved (while a pan settles,
+  every texture edge stirs).
   Neither counts the pixels whose depth turned farther: what left them (a person walking
   away, uncovering the wall) changed their colour, not the light. Without colour (none in
   the stream, or this frame's was lost) depth alone decides. What stays static in depth but
@@ -170,6 +174,10 @@ COLOR_OUTSIDE_FRACTION = 0.01
 #: Certified-static pixels within this many pixels (strided image) of a stirred one are
 #: released.
 COLOR_RELEASE_PX = 4
+#: A component that moves by colour alone renews the hold (HOLD_S) only where the same
+#: surface (depth within the margin) also moved by colour within this time before: one
+#: frame's stirring (a runner's outline left on the lamp they uncovered) is no motion to hold.
+COLOR_CONFIRM_S = 0.2
 
 
 def _margin(depth: npt.NDArray[np.float32], base: float) -> npt.NDArray[np.float32]:
@@ -346,6 +354,8 @@ class BackgroundModel:
         self._near_since = np.full(shape, t, np.float64)
         self._kept_t = np.full(shape, -np.inf, np.float64)
         self._kept_z = np.zeros(shape, np.float32)
+        self._colour_t = np.full(shape, -np.inf, np.float64)
+        self._colour_z = np.zeros(shape, np.float32)
         self._static_z = np.zeros(shape, np.float32)
         self._static_since = np.zeros(shape, np.float64)
         self._moving_labels = np.zeros(1, bool)
@@ -467,7 +477,6 @@ class BackgroundModel:
             # Learning: this frame's own colour decides (module docstring), and serves the
             # next frame as the evidence observe_color would have given it.
             stirred = self._evidence = self._color_evidence(color, self._last)
-
         n_known = int(np.count_nonzero(known))
         # Camera motion is judged from the depth only when the colour has nothing to say: with
         # colour evidence, floor, walls and what lies beyond the box stood still in the colour
@@ -535,16 +544,25 @@ class BackgroundModel:
                                    cv2.MORPH_OPEN,
                                    np.ones((3, 3), np.uint8)).view(bool)
         moving = _enough(labels, changed, total, MIN_CHANGED_FRACTION, stride)
+        # Components with changed pixels renew the hold (below); one that moves by colour
+        # alone only on the surface that also stirred within COLOR_CONFIRM_S.
+        renew = moving[labels]
         if stirred is not None:
-            moving |= _enough(labels, stirred, total, COLOR_MIN_FRACTION, stride)
+            by_colour = _enough(labels, stirred, total, COLOR_MIN_FRACTION, stride)
+            on_colour = by_colour[labels]
+            renew |= (on_colour & (t - self._colour_t <= COLOR_CONFIRM_S)
+                      & (np.abs(d - self._colour_z) <= margin))
+            self._colour_t[on_colour] = t
+            self._colour_z[on_colour] = d[on_colour]
+            moving |= by_colour
         # Held: pixels kept because of changed pixels within HOLD_S, at the same depth (the
         # same surface, not the wall an arm swept over).
         recent = (t - self._kept_t <= HOLD_S) & (np.abs(d - self._kept_z) <= margin)
         held = np.bincount(labels[recent], minlength=n) >= HOLD_FRACTION * total
-        # Only components with changed pixels renew the hold, and not on pixels certifying
-        # as static (furniture that a noisy edge joined to a person for a frame).
+        # The hold is not renewed on pixels certifying as static (furniture that a noisy edge
+        # joined to a person for a frame).
         certifying = (self._static_z > 0) & (np.abs(d - self._static_z) <= margin)
-        renew = moving[labels] & ~certifying
+        renew &= ~certifying
         self._kept_t[renew] = t
         self._kept_z[renew] = d[renew]
         self._moving_labels = moving
