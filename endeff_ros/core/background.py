@@ -69,17 +69,17 @@ background model removes what never moved, with the person present from the firs
   them), until something changes in front of them or they turn farther.
 - **Learning**: for ``background_learn_s`` after the start (and after a re-learn) no depth
   change can show yet. With colour evidence only the components that stir are kept, and
-  the evidence is the frame's own colour (:meth:`foreground`'s ``color``; the node waits for
-  it then, :attr:`learning`): from the second frame on, the first has nothing to compare
-  with. Late evidence would leave the second frame without any, and the furniture in it
-  (docs/results.md: furnished rooms' excess FPR +0.038 -> +0.026 on dev). Without colour
-  everything is kept. Every frame that keeps everything keeps the
-  furniture's false positives (1 s of 3 s bags kept furnished rooms at FPR 0.25-0.29 against
-  0.01-0.17 empty), but dropping at once drops a person present from frame 0 until they have
-  moved by more than the margin; a moving person's changed pixels survive the opening within
-  a few frames, so the default is short (0.2 s). Bookkeeping that would certify pixels as
-  static also waits for its end (a person's torso would be certified before their arm first
-  moved).
+  the evidence is the frame's own colour (:meth:`BackgroundModel.foreground`'s ``color``;
+  the node waits for it then, :attr:`BackgroundModel.wants_color`): from the second frame
+  on, the first has nothing to compare with. Late evidence would leave the second frame
+  without any, and the furniture in it (docs/results.md: furnished rooms' excess FPR
+  +0.038 -> +0.026 on dev). Without colour everything is kept. Every frame that keeps
+  everything keeps the furniture's false positives (1 s of 3 s bags kept furnished rooms at
+  FPR 0.25-0.29 against 0.01-0.17 empty), but dropping at once drops a person present from
+  frame 0 until they have moved by more than the margin; a moving person's changed pixels
+  survive the opening within a few frames, so the default is short (0.2 s). Bookkeeping
+  that would certify pixels as static also waits for its end (a person's torso would be
+  certified before their arm first moved).
 - **Absorption**: a pixel that stays nearer than the background, at a steady depth, for
   ``background_absorb_s`` becomes background (an object put down and left). Pixels of a
   component holding a track (:meth:`BackgroundModel.protect`, called by the tracker) restart
