@@ -44,3 +44,19 @@ def test_report_per_room_and_refuses_a_folder_without_pans(pan_bags, tmp_path, c
         pan_check.main([str(tmp_path)])
     assert exc.value.code == 2
     assert 'no pan bags' in capsys.readouterr().err
+
+
+def test_matches_are_keyed_by_the_ground_truth_id():
+    """When an end-effector leaves the view, the rows of the others shift: the ground
+    truth's ``id`` field, not the row, names them (the row only without ids)."""
+    import numpy as np
+
+    gt_before = np.array([[0.0, 0.0, 2.0], [0.5, 0.0, 2.0], [1.0, 0.0, 2.0]])
+    gt_after = gt_before[1:]  # id 0 left the view
+    tracks = np.array([[0.51, 0.0, 2.0], [1.01, 0.0, 2.0], [3.0, 0.0, 2.0]])
+    ids, fp = pan_check.matched_ids(tracks, [7, 8, 9], gt_after, np.array([1, 2]))
+    assert ids == {1: 7, 2: 8} and fp == 1
+    ids, _ = pan_check.matched_ids(tracks[:2], [7, 8], gt_before, np.array([0, 1, 2]))
+    assert ids == {1: 7, 2: 8}
+    ids, _ = pan_check.matched_ids(tracks[:2], [7, 8], gt_after, None)
+    assert ids == {0: 7, 1: 8}

@@ -3,10 +3,10 @@
 For every bag of the rooms suite whose camera pans (``*-pan``; the pan's stamps are in the
 bag's ``endeff.details``), the tracker runs over the bag with the given parameters; tracks are
 matched to the ground truth per frame as ``endeff eval`` does (``scoring.score_frame``).
-Reported per bag: how many end-effectors matched just before the pan are matched to the same
-track id when next matched after it, and the false positives per frame before the pan
-(after its first 10 frames), at most during the pan and the 2 s after it, and from 2 s after
-the pan's end on.
+Reported per bag: how many end-effectors (the ground truth's ``id``) matched just before the
+pan are matched to the same track id when next matched after it, and the false positives per
+frame before the pan (after its first 10 frames), at most during the pan and the 2 s after
+it, and from 2 s after the pan's end on.
 
     python -m tools.pan_check data/rooms/mcap [--params YAML] [--jobs 2] [--json OUT]
 """
@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,9 +26,13 @@ from endeff_ros.cli_common import load_params_option, print_json
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.tracker import Tracker
+from endeff_ros.evaluate import gt_ids
 from endeff_ros.scoring import score_frame
 from endeff_ros.synth.suite import DETAILS_KEY
 from tools.per_bag import run_per_bag
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
 
 CLEAN_AFTER_NS = 2_000_000_000
 
@@ -39,12 +43,25 @@ def _pan_stamps(reader: BagReader) -> tuple[int, int]:
     return int(pan['start_stamp_ns']), int(pan['end_stamp_ns'])
 
 
+def matched_ids(positions: npt.NDArray[np.float64], track_ids: list[int],
+                gt: npt.NDArray[np.float64], gt_id: npt.NDArray[np.int64] | None,
+                ) -> tuple[dict[int, int], int]:
+    """``({ground-truth id: track id}, false positives)`` of one frame scored as ``endeff
+    eval`` does. The ground truth's ``id`` field (``gt_id``, aligned with ``gt``) names an
+    end-effector: its row changes when another one leaves or enters the view, as during a
+    pan. Without ids (None, or not aligned), the row index."""
+    score = score_frame(np.asarray(positions, dtype=np.float64).reshape(-1, 3), gt[:, :3])
+    key = gt_id if gt_id is not None and len(gt_id) == len(gt) else np.arange(len(gt))
+    return {int(key[g]): int(track_ids[e]) for e, g in score.matches}, score.fp
+
+
 def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
     """The figures above for one pan bag."""
     tracker = Tracker(params)
     rows: list[tuple[int, int, dict[int, int]]] = []  # stamp, false positives, gt -> track id
     with BagReader(bag) as reader:
         start, end = _pan_stamps(reader)
+        ids_by_stamp = gt_ids(reader)
         for frame, gt in reader.frames():
             try:
                 tracks = tracker.update(frame).tracks
@@ -52,10 +69,8 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
                 tracks = []
             if gt is None:
                 continue
-            score = score_frame(np.array([t.position for t in tracks]).reshape(-1, 3),
-                                gt[:, :3])
-            ids = {int(g): tracks[int(e)].id for e, g in score.matches}
-            fp = score.fp
+            ids, fp = matched_ids(np.array([t.position for t in tracks]), [t.id for t in tracks],
+                                  gt, ids_by_stamp.get(frame.stamp_ns))
             rows.append((frame.stamp_ns, fp, ids))
     before = [r for r in rows if r[0] < start]
     during = [r for r in rows if start <= r[0] < end + CLEAN_AFTER_NS]
