@@ -338,6 +338,38 @@ def test_vanished_limb_removed_within_t_frames(keep):
         assert np.linalg.norm(r.results[i].positions() - tip, axis=1).min() > TOL
 
 
+def _limb_away(n_gone: int) -> list[sc.Shot]:
+    """A star whose limb 0 is gone for ``n_gone`` frames and then comes back."""
+    whole = sc.star_limb_vanishes(6, n_gone)
+    back = [sc.shoot(sc.scenes.star(5, length=sc.STAR_LENGTH), len(whole) + i, label='back')
+            for i in range(4)]
+    return whole + back
+
+
+@pytest.mark.parametrize(('n_gone', 'revive', 'same'), [(3, 0.3, True), (10, 0.3, False),
+                                                         (3, 0.0, False)])
+def test_end_effector_found_again_soon_takes_its_id_back(n_gone, revive, same):
+    """A limb gone for a few frames (its track dropped: no foreground left near its
+    prediction) and back where it was: within T frames of the loss, the new track takes the
+    lost id back (``revive_distance``); later, or with revival off, it gets a new id, never
+    one used before."""
+    shots = _limb_away(n_gone)
+    r = run(shots, EndeffParams(keep_frames=8, revive_distance=revive), single=False)
+    tip = sc.star_tip(5, 0)
+    gone, back = r.labels('gone'), r.labels('back')
+    before, d = r.nearest(gone[0] - 1, tip)
+    assert d < TOL
+    assert all(r.track(i, before.id) is None for i in gone[2:]), r.table(before.id, 0)
+    after, d = r.nearest(back[-1], tip)
+    assert d < TOL
+    assert (after.id == before.id) is same, (before.id, after.id)
+    if not same:
+        assert after.id > max(t.id for i in range(back[0]) for t in r.results[i].tracks)
+    # The other limbs keep their ids throughout.
+    others = {r.nearest(0, sc.star_tip(5, k))[0].id for k in range(1, 5)}
+    assert all(others <= set(r.ids(i)) for i in range(6, len(shots)))
+
+
 # -- 5. Two people: unique ids, entity per person ------------------------------------------------
 
 
