@@ -259,16 +259,26 @@ def _with_feet(out: npt.NDArray[np.bool_], depth: npt.NDArray[np.float32],
     person's legs."""
     if low is None:
         return out
+    band = low & candidate
+    rows = np.flatnonzero(band.any(axis=1))
+    if len(rows) == 0:
+        return out
+    # Only the rows holding the band (and one either side for the 3x3 neighbourhood): the
+    # band lies along the floor, often a fraction of the image.
+    rs = slice(max(int(rows[0]) - 1, 0), int(rows[-1]) + 2)
+    o, z = out[rs], depth[rs]
     box = np.ones((3, 3), np.uint8)
-    hi = cv2.dilate(np.where(out, depth, 0).astype(np.float32), box)
-    lo = cv2.erode(np.where(out, depth, np.inf).astype(np.float32), box)
+    hi = cv2.dilate(np.where(o, z, 0).astype(np.float32), box)
+    lo = cv2.erode(np.where(o, z, np.inf).astype(np.float32), box)
     step = np.float32(EDGE_STEP + EDGE_STEP_Z * 3.0) * stride
-    low_labels, _ = depth_components(depth, low & candidate, stride, far_side)
-    touch = (low_labels > 0) & (depth >= lo - step) & (depth <= hi + step)
+    low_labels, _ = depth_components(z, band[rs], stride, far_side[rs])
+    touch = (low_labels > 0) & (z >= lo - step) & (z <= hi + step)
     attached = np.zeros(int(low_labels.max()) + 1, bool)
     attached[low_labels[touch]] = True
     attached[0] = False
-    return out | attached[low_labels]
+    out = out.copy()
+    out[rs] |= attached[low_labels]
+    return out
 
 
 def _windows(image: npt.NDArray, uv: npt.NDArray[np.int64]) -> npt.NDArray:
