@@ -474,7 +474,10 @@ class BackgroundModel:
         nearer = known & (d < bg - margin)
         farther = known & (d > bg + margin)
         stirred, self._evidence = self._evidence, None
-        if stirred is not None:
+        # Learning: this frame's own colour decides (module docstring), and serves the next
+        # frame as the evidence observe_color would have given it.
+        color_now = color is not None and t < self._learn_until
+        if stirred is not None and not color_now:
             # The evidence is the frame before's, and holds for the surface that was there: not
             # where the depth has turned farther since (what stirred has left: a runner passing
             # a shelf) nor where there was no reading and the background is seen now (the
@@ -483,9 +486,7 @@ class BackgroundModel:
             stirred = (stirred & ~((prev > 0) & (d > prev + _margin(prev, self._last.base_margin)))
                        & ~((prev <= 0) & known & ~nearer))
         self._remember(stamp_ns, d, valid, candidate, params)
-        if color is not None and t < self._learn_until:
-            # Learning: this frame's own colour decides (module docstring), and serves the
-            # next frame as the evidence observe_color would have given it.
+        if color_now:
             stirred = self._evidence = self._color_evidence(color, self._last)
         n_known = int(np.count_nonzero(known))
         # Camera motion is judged from the depth only when the colour has nothing to say: with
