@@ -69,11 +69,7 @@ background model removes what never moved, with the person present from the firs
   them), until something changes in front of them or they turn farther. When learning ends,
   what the colour saw still in ``STILL_LEARNING_FRAMES`` learning frames at one depth is
   certified at once: a still person's arm that joins a shelf in the first frame after
-  learning would otherwise carry the shelf along before it could certify. Where noise broke
-  the certification (a pixel that left the margin once stays uncertified while it is
-  foreground), the pieces that certified pixels cut off from the moving part are dropped
-  unless a pixel of theirs changed or stirred within ``HOLD_S`` (or a carried track sits on
-  them): such fragments of a shelf have corners, and corners are end-effectors.
+  learning would otherwise carry the shelf along before it could certify.
 - **Learning**: for ``background_learn_s`` after the start (and after a re-learn) no depth
   change can show yet. With colour evidence only the components that stir are kept, and
   the evidence is the frame's own colour (:meth:`BackgroundModel.foreground`'s ``color``;
@@ -382,8 +378,6 @@ class BackgroundModel:
         self._still_n = np.zeros(shape, np.int16)  # learning frames left out, same depth
         self._still_z = np.zeros(shape, np.float32)
         self._seeded = False  # certified from the learning frames
-        self._evident_t = np.full(shape, -np.inf, np.float64)  # last changed or stirred
-        self._evident_z = np.zeros(shape, np.float32)
         self._moving_labels = np.zeros(1, bool)
         self._out = np.zeros(shape, bool)
         self._learn_until = t + params.background_learn_s
@@ -566,7 +560,6 @@ class BackgroundModel:
             # Learning with colour: only what stirs (a person present from the start has not
             # moved in depth yet; furniture does neither).
             out = _enough(labels, stirred, total, COLOR_MIN_FRACTION, stride)[labels] & candidate
-            self._evident(stirred, d, t)
             left = upper & ~out
             same = left & (self._still_n > 0) & (np.abs(d - self._still_z) <= margin)
             self._still_n = np.where(left, np.where(same, self._still_n + 1, 1),
@@ -627,47 +620,12 @@ class BackgroundModel:
             gone |= fg & cv2.dilate(stirred.view(np.uint8), np.ones((k, k), np.uint8)).view(bool)
         self._static_z[gone] = 0
         static = (self._static_z > 0) & margin_ok & (t - self._static_since >= STATIC_S)
-        removed = fg & static & ~changed
-        out = (fg & ~removed) | (edge & changed)
-        self._evident(changed if stirred is None else changed | stirred, d, t)
-        if removed.any():
-            out = self._without_cut_pieces(out, labels, removed, d, t, margin, far_side, stride)
+        out = (fg & ~(static & ~changed)) | (edge & changed)
         out = _with_feet(out, d, low, candidate, far_side, stride)
         if low is not None:
             out |= low & candidate & changed
         self._out = out
         return out
-
-    def _evident(self, evident: npt.NDArray[np.bool_], d: npt.NDArray[np.float32],
-                 t: float) -> None:
-        """Remember when and at what depth each pixel last changed or stirred itself."""
-        self._evident_t[evident] = t
-        self._evident_z[evident] = d[evident]
-
-    def _without_cut_pieces(self, out: npt.NDArray[np.bool_], labels: npt.NDArray[np.int32],
-                            removed: npt.NDArray[np.bool_], d: npt.NDArray[np.float32],
-                            t: float, margin: npt.NDArray[np.float32],
-                            far_side: npt.NDArray[np.bool_], stride: int,
-                            ) -> npt.NDArray[np.bool_]:
-        """``out`` without the pieces that certified-static pixels (``removed``) cut off
-        from the moving part of their component and that show no motion of their own (a
-        pixel that changed or stirred within HOLD_S at its depth) nor hold a carried track.
-
-        Certification needs a pixel to stay within the margin of one depth, which sensor noise
-        (ToF at 3 m, stereo at a shelf's edges) breaks here and there: those pixels stay
-        foreground with the moving component that joined the furniture, as fragments whose
-        corners are end-effectors. A person's own parts are never certified while they move
-        with it, so they are not cut from it."""
-        cut = np.zeros(int(labels.max()) + 1, bool)
-        cut[labels[removed]] = True
-        cut[0] = False
-        region = out & cut[labels]
-        pieces, _ = depth_components(d, region, stride, far_side)
-        alive = region & (t - self._evident_t <= HOLD_S) & (np.abs(d - self._evident_z) <= margin)
-        good = np.bincount(pieces[alive], minlength=int(pieces.max()) + 1) > 0
-        good[self._track_labels(pieces, self._carried_uv)] = True
-        good[0] = False
-        return out & ~(region & ~good[pieces])
 
     def _track_labels(self, labels: npt.NDArray[np.int32],
                       uv: npt.NDArray[np.int64]) -> npt.NDArray[np.int32]:
