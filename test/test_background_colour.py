@@ -286,9 +286,11 @@ def test_person_walking_away_close_to_the_camera_is_no_camera_motion():
     assert _walk_away(with_colour=True) == 0
 
 
-def test_camera_pan_with_colour_relearns():
-    """A 20 degree pan with the colour image panning with the depth: the whole image
-    changes, colour says nothing, and the depth's camera motion re-learns the background."""
+def _pan_with_colour(with_colour: bool, fraction: float = 0.08) -> tuple[BackgroundModel, int]:
+    """A 20 degree pan from frame 30 to 60 with the colour image panning with the depth
+    (``with_colour``) or no colour; ``fraction``: ``background_camera_motion_fraction``.
+    Returns the model and the foreground points of the last frame (the turned chair)."""
+    params = PARAMS.replace(background_camera_motion_fraction=fraction)
     model = BackgroundModel()
     static = room().copy()
     add_chair(static)
@@ -298,11 +300,30 @@ def test_camera_pan_with_colour_relearns():
         yaw = float(np.radians(20.0) * 0.5 * (1 - np.cos(np.pi * s)))
         depth = _turned(static, yaw) if yaw else static
         shift = int(round(K.fx * np.tan(yaw)))
-        f = _colour_frame(k, depth, none, room_shift=shift)
-        est = estimate_frame(f, PARAMS, background=model)
+        f = _colour_frame(k, depth, none, room_shift=shift, with_colour=with_colour)
+        est = estimate_frame(f, params, background=model)
         model.observe_color(f.color, f.stamp_ns)
+    return model, est.points.shape[0]
+
+
+def test_camera_pan_with_colour_relearns():
+    """A 20 degree pan with the colour image panning with the depth: the whole image
+    changes, colour says nothing, and the depth's camera motion re-learns the background."""
+    model, points = _pan_with_colour(True)
     assert model.relearns >= 1
-    assert est.points.shape[0] == 0  # the turned chair is background again
+    assert points == 0  # the turned chair is background again
+
+
+def test_pan_the_depth_barely_shows_relearns_once_the_colour_settles():
+    """A camera motion fraction the pan's depth never reaches (25 %, where a third of it is
+    reached): without colour nothing is re-learnt and the chair's edges stay foreground;
+    with it, the colour saying that the whole scene changed lowers the bar, and re-learning
+    goes on while it says so, so the background is the view after the turn."""
+    model, points = _pan_with_colour(False, 0.25)
+    assert model.relearns == 0 and points > 1000
+    model, points = _pan_with_colour(True, 0.25)
+    assert model.relearns >= 1
+    assert points == 0
 
 
 def test_strided_grey_of_colour_and_mono():

@@ -101,7 +101,13 @@ background model removes what never moved, with the person present from the firs
   degree would otherwise leave every edge of the furniture "changed"). The tracks that sat
   on a moving component for ``CARRY_AFTER_S`` when the turn began keep their components
   foreground through it (:meth:`BackgroundModel.protect`): a person standing still while the
-  camera turns has no changed pixel when learning ends.
+  camera turns has no changed pixel when learning ends. The colour helps twice. When its
+  last evidence said the whole scene changed (floor and walls stirred: a pan, or the light),
+  a third of the fraction is enough: a turn over a floor and far walls changes few depths
+  (turning about the vertical axis keeps a level floor's depth along each image row), and a
+  change of light moves no depth at all. And while learning after a turn, a frame whose
+  colour still says the scene moves re-learns again, so the background is the view after
+  the camera stopped, not one taken mid-turn, whose furniture edges would stay "changed".
 
 Everything is vectorised on the strided image the cloud is built from (320x240 by default):
 a few dozen array operations and one ``cv2.connectedComponents``. Time comes from the frame
@@ -322,6 +328,7 @@ class BackgroundModel:
         # (time, strided grey, strided depth) of the recent frames
         self._greys: list[tuple[float, npt.NDArray[np.uint8], npt.NDArray[np.float32]]] = []
         self._last: _Taken | None = None  # the last frame foreground() took
+        self._scene_moved = False  # the last colour evidence said: the whole scene changed
         self._evidence: npt.NDArray[np.bool_] | None = None  # stirred pixels, for the next
         self._last_raw: float | None = None
         self._seen_color: int | None = None  # stamp of the last colour taken
@@ -419,6 +426,7 @@ class BackgroundModel:
         """The stirred pixels of ``color``, the colour of the frame ``last`` (see
         :meth:`observe_color`), or None."""
         self._seen_color = last.stamp_ns
+        self._scene_moved = False
         t, depth, outside = last.t, last.depth, last.outside
         grey = strided_grey(color, depth.shape)
         greys = self._greys
@@ -442,6 +450,7 @@ class BackgroundModel:
         if (np.count_nonzero(broad) > COLOR_GLOBAL_FRACTION * diff.size
                 or np.count_nonzero(broad & outside)
                 > COLOR_OUTSIDE_FRACTION * np.count_nonzero(outside)):
+            self._scene_moved = True
             return None  # the light changed or the camera moved: nothing to tell
         return stirred & ~left
 
@@ -484,6 +493,7 @@ class BackgroundModel:
         nearer = known & (d < bg - margin)
         farther = known & (d > bg + margin)
         stirred, self._evidence = self._evidence, None
+        scene_moved, self._scene_moved = self._scene_moved, False
         # Learning: this frame's own colour decides (module docstring), and serves the next
         # frame as the evidence observe_color would have given it.
         color_now = color is not None and t < self._learn_until
@@ -498,18 +508,23 @@ class BackgroundModel:
         self._remember(stamp_ns, d, valid, candidate, params)
         if color_now:
             stirred = self._evidence = self._color_evidence(color, self._last)
+            scene_moved = self._scene_moved
         n_known = int(np.count_nonzero(known))
         # Camera motion is judged from the depth only when the colour has nothing to say: with
         # colour evidence, floor, walls and what lies beyond the box stood still in the colour
         # image (a person close to the camera walking away changes as many pixels nearer and
-        # farther as a pan does).
+        # farther as a pan does). When the colour said the whole scene changed, a third of the
+        # fraction will do, and while learning after a turn such a frame re-learns again
+        # (module docstring, "Camera motion").
+        settling = self._settling and t < self._learn_until
         if n_known >= MIN_KNOWN_FRACTION * d.size and stirred is None:
             recent_far = farther | (self._far_t > t - RECENT_FAR_S)
             f = params.background_camera_motion_fraction * n_known
-            if self._settling and t < self._learn_until:
+            if settling or scene_moved:
                 f /= SETTLING_DIVISOR
-            if np.count_nonzero(nearer) >= f and np.count_nonzero(recent_far & known) >= f:
-                if not (self._settling and t < self._learn_until):
+            if (settling and scene_moved) or (np.count_nonzero(nearer) >= f
+                                              and np.count_nonzero(recent_far & known) >= f):
+                if not settling:
                     # The turn begins (tracks that became foreground as it began sit on
                     # furniture): these tracks are carried through it.
                     self._carried |= {i for i, since in self._fg_ids.items()
