@@ -151,6 +151,31 @@ def test_light_change_is_no_motion():
     assert all(person == 0 and chair == 0 for _, person, chair in out[20:])
 
 
+def test_person_filling_the_image_is_no_sign_that_the_scene_moved():
+    """A person close to the camera (0.7 m) whose colour changes all over, every frame, fills
+    more than COLOR_GLOBAL_FRACTION of the image: no colour evidence then, but no sign of a
+    moving scene either (that needs what holds no entity to stir), so the camera-motion test
+    keeps its full fraction; a lamp switched on is such a sign."""
+    model = BackgroundModel()
+    flags = []
+    for k in range(20):
+        depth = room().copy()
+        person = np.full(depth.shape, np.inf, np.float32)
+        for image in (depth, person):
+            add_person(image, 0.0, 0.5, z=0.7)
+        grey = ROOM_TEXTURE.copy() + (40 if k >= 15 else 0)
+        grey[np.isfinite(person)] = _texture(100 + k)[np.isfinite(person)]
+        color = np.repeat(np.clip(grey, 0, 255).astype(np.uint8)[:, :, None], 3, axis=2)
+        f = RGBDFrame(stamp_ns=k * DT_NS, frame_id='camera', depth=depth, intrinsics=K,
+                      color=color)
+        estimate_frame(f, PARAMS, background=model)
+        model.observe_color(f.color, f.stamp_ns)
+        flags.append((model._evidence is None, model._scene_moved))
+    assert np.isfinite(person).mean() > 0.3
+    assert all(none and not moved for none, moved in flags[1:15]), flags
+    assert all(moved for _, moved in flags[15:])
+
+
 def test_camera_shaking_in_colour_only_is_no_motion():
     """The colour image shakes by a pixel (a camera on a vibrating robot) while the depth
     shows nothing: the floor and walls stir too, so colour says nothing about the scene."""

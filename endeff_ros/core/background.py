@@ -447,10 +447,11 @@ class BackgroundModel:
         # A change of the whole image is judged on a fixed step: the noise-relative one rises
         # with it (a pan's every pixel changes, and the median with them).
         broad = (diff > COLOR_MIN_STEP) & ~left
-        if (np.count_nonzero(broad) > COLOR_GLOBAL_FRACTION * diff.size
-                or np.count_nonzero(broad & outside)
-                > COLOR_OUTSIDE_FRACTION * np.count_nonzero(outside)):
-            self._scene_moved = True
+        # What holds no entity stirred: the scene moved (or the light changed). Most of the
+        # image stirring alone is no such sign: a person close to the camera fills it.
+        self._scene_moved = (np.count_nonzero(broad & outside)
+                             > COLOR_OUTSIDE_FRACTION * np.count_nonzero(outside))
+        if self._scene_moved or np.count_nonzero(broad) > COLOR_GLOBAL_FRACTION * diff.size:
             return None  # the light changed or the camera moved: nothing to tell
         return stirred & ~left
 
