@@ -45,7 +45,7 @@ from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.tracker import Tracker
 from endeff_ros.evaluate import gt_ids, is_person_sequence
 from endeff_ros.scoring import MATCH_THRESHOLD_M, kinds_of_ids
-from tools.per_bag import run_per_bag
+from tools.per_bag import bag_paths, run_per_bag
 
 SURFACE_M = 0.12  # a part's centre lies up to about its radius behind the visible surface
 BODY_M = 0.6
@@ -134,13 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--json', help='also write the report here')
     args = parser.parse_args(argv)
     params = load_params_option(args.params, 'miss_check')
-    bags: list[Path] = []
-    for arg in map(Path, args.bags):
-        if (arg / 'metadata.yaml').is_file():
-            bags.append(arg)
-        else:
-            bags.extend(sorted(q.parent for q in arg.glob('*/metadata.yaml')))
-    bags = sorted(bags)[::max(1, args.every)]
+    bags = bag_paths(args.bags, args.every)
     if not bags:
         parser.error('no bags (folders with metadata.yaml) given')
     per_bag = run_per_bag(check_bag, bags, params, args.jobs)
