@@ -6,26 +6,8 @@ import dataclasses
 
 import pytest
 
-from endeff_ros.bag.reader import BagReader
 from endeff_ros.core.params import EndeffParams
-from endeff_ros.synth.proc_clips import walk_clip, wave_clip
-from endeff_ros.synth.rooms_suite import rooms_specs
-from endeff_ros.synth.suite import write_bag
 from tools import miss_check
-
-
-@pytest.fixture(scope='module')
-def room_bag(tmp_path_factory):
-    clips = [walk_clip(40, name='walk_a'), wave_clip(40, name='wave_a', split='dev')]
-    byname = {c.name: c for c in clips}
-    out = tmp_path_factory.mktemp('rooms')
-    spec = next(s for s in rooms_specs(clips, quick=True)
-                if s.pan is None and '-empty-' in s.name)
-    write_bag(spec, byname, out)
-    bag = out / 'mcap' / spec.name
-    with BagReader(bag) as reader:
-        points = sum(len(gt) for _, gt in reader.frames() if gt is not None)
-    return bag, points
 
 
 def test_every_point_gets_one_class(room_bag):

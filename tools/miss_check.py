@@ -29,7 +29,6 @@ a score.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 from typing import Any
 
@@ -38,14 +37,14 @@ from scipy.spatial import cKDTree
 
 from endeff_ros.attributes import custom_data, parse_attributes
 from endeff_ros.bag.reader import BagReader
-from endeff_ros.cli_common import load_params_option, print_json
+from endeff_ros.cli_common import print_json
 from endeff_ros.core.cloud import box_mask, depth_to_points
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.tracker import Tracker
 from endeff_ros.evaluate import gt_ids, is_person_sequence
 from endeff_ros.scoring import MATCH_THRESHOLD_M, kinds_of_ids
-from tools.per_bag import bag_paths, run_per_bag
+from tools.per_bag import parse_bag_args, run_per_bag
 
 SURFACE_M = 0.12  # a part's centre lies up to about its radius behind the visible surface
 BODY_M = 0.6
@@ -126,17 +125,7 @@ def _shares(rows: list[dict[str, Any]], key: str) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('bags', nargs='+', help='bags, or folders holding bags')
-    parser.add_argument('--every', type=int, default=1, help='every N-th bag (sorted by name)')
-    parser.add_argument('--params', help='parameter YAML (default: the defaults)')
-    parser.add_argument('--jobs', type=int, default=1)
-    parser.add_argument('--json', help='also write the report here')
-    args = parser.parse_args(argv)
-    params = load_params_option(args.params, 'miss_check')
-    bags = bag_paths(args.bags, args.every)
-    if not bags:
-        parser.error('no bags (folders with metadata.yaml) given')
+    args, bags, params = parse_bag_args(__doc__, argv, 'miss_check')
     per_bag = run_per_bag(check_bag, bags, params, args.jobs)
     kinds = sorted({k for r in per_bag for k in r['ground_truth_by_kind']})
     by_kind = {k: _shares([{'c': r['ground_truth_by_kind'][k]} for r in per_bag

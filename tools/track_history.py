@@ -31,7 +31,6 @@ A tally of causes for the tracker's work, not a score.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 from typing import Any
 
@@ -39,13 +38,13 @@ import numpy as np
 
 from endeff_ros.attributes import custom_data, parse_attributes
 from endeff_ros.bag.reader import BagReader
-from endeff_ros.cli_common import load_params_option, print_json
+from endeff_ros.cli_common import print_json
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.tracker import Tracker
 from endeff_ros.evaluate import gt_ids, is_person_sequence
 from endeff_ros.scoring import kinds_of_ids, score_frame
-from tools.per_bag import bag_paths, run_per_bag
+from tools.per_bag import parse_bag_args, run_per_bag
 
 NEAR_M = 0.3
 RECENT = (10, 30)
@@ -158,17 +157,7 @@ def _sum(rows: list[dict[str, Any]], key: str, names: tuple[str, ...]) -> dict[s
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('bags', nargs='+', help='bags, or folders holding bags')
-    parser.add_argument('--every', type=int, default=1, help='every N-th bag (sorted by name)')
-    parser.add_argument('--params', help='parameter YAML (default: the defaults)')
-    parser.add_argument('--jobs', type=int, default=1)
-    parser.add_argument('--json', help='also write the report here')
-    args = parser.parse_args(argv)
-    params = load_params_option(args.params, 'track_history')
-    bags = bag_paths(args.bags, args.every)
-    if not bags:
-        parser.error('no bags (folders with metadata.yaml) given')
+    args, bags, params = parse_bag_args(__doc__, argv, 'track_history')
     per_bag = run_per_bag(check_bag, bags, params, args.jobs)
     print_json({'history': _sum(per_bag, 'history', HISTORY),
                 'lost_track': _sum(per_bag, 'lost_track', LOST), 'bags': per_bag}, args.json)
