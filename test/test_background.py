@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
-from endeff_ros.core.background import BackgroundModel, depth_components
+from endeff_ros.core.background import BackgroundModel, bridge_dropouts, depth_components
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.single_frame import estimate_frame
 from endeff_ros.core.tracker import Tracker
@@ -162,6 +162,43 @@ def test_robot_pedestal_stays_with_its_moving_arm():
                                              & (est.points[:, 1] > CAMERA_HEIGHT - 0.6))))
     assert not model.learning
     assert min(pedestal[-20:]) > 20
+
+
+def test_pedestal_with_dropouts_stays_with_its_moving_arm():
+    """The same pedestal seen by a sensor that loses every fourth row of it (stereo
+    dropouts): the dropouts would cut it into strips that never move, dropped once
+    learning ends; bridged where the readings around them agree, it stays one part with the
+    arm."""
+    model = BackgroundModel()
+    pedestal = []
+    for k in range(45):
+        depth = room().copy()
+        paint(depth, -0.1, 0.1, 0.0, 0.9, 2.5)
+        lost = np.zeros(depth.shape, bool)
+        lost[::4] = True
+        lost &= depth == np.float32(2.5)
+        angle = 0.8 * np.sin(k / 4.0)
+        tip = (0.1 + 0.5 * np.cos(angle), 0.85 + 0.5 * np.sin(angle))
+        arm = np.zeros(depth.shape, np.uint8)
+        cv2.line(arm, (_u(0.1, 2.5), _v(0.85, 2.5)), (_u(tip[0], 2.5), _v(tip[1], 2.5)), 1,
+                 thickness=_u(0.08, 2.5) - _u(0.0, 2.5))
+        depth[arm > 0] = 2.5
+        lost &= arm == 0
+        f = frame(k, depth)
+        f.depth[lost] = 0.0  # no reading
+        est = estimate_frame(f, PARAMS, background=model)
+        pedestal.append(int(np.count_nonzero((np.abs(est.points[:, 0]) < 0.1)
+                                             & (est.points[:, 1] > CAMERA_HEIGHT - 0.6))))
+    assert not model.learning
+    assert min(pedestal[-20:]) > 20
+
+
+def test_dropouts_bridge_only_where_the_readings_around_agree():
+    depth = np.array([[2.0, 0.0, 2.05, 0.0, 3.0]], np.float32).repeat(3, axis=0)
+    mask = depth > 0
+    bridged, joined = bridge_dropouts(depth, mask)
+    assert joined[1, 1] and bridged[1, 1] == np.float32(2.0)  # within the step: nearest depth
+    assert not joined[1, 3] and bridged[1, 3] == 0  # between 2.05 and 3.0: no bridge
 
 
 def test_furniture_stays_background_when_a_person_stands_beside_it():

@@ -26,6 +26,10 @@ background model removes what never moved, with the person present from the firs
   robot's static pedestal stays with its moving arm. Pixels within ``cloud.FLOOR_BAND`` of
   the floor do not connect components (the floor's noisy remnants joined feet to chair
   legs); they are kept next to kept pixels at their depth.
+  Pixels without a reading inside a surface (stereo and ToF dropouts: a D455's legs at 3 m
+  lose every few pixels) connect their neighbours when those agree within ``BRIDGE_STEP``
+  (:func:`bridge_dropouts`), and count for nothing else: otherwise a still leg falls apart
+  into specks without a changed pixel, which are dropped and certified static.
   Pixels removed at depth edges (the far side of a jump) are kept only if they changed
   themselves. The edge step is large enough (about 0.37 m at 3 m with the default stride 2)
   that a body's own occlusions, hands in front of the chest or a torso bending towards the
@@ -191,6 +195,9 @@ COLOR_CONFIRM_S = 0.2
 #: stirred on their component) at least this many times at the same depth are certified
 #: static at once: furniture a still person's arm joins in the first frame after learning.
 STILL_LEARNING_FRAMES = 2
+#: Dropouts (no reading) are bridged for the labelling where the readings around them agree
+#: within this depth (m): stereo and ToF dropouts would cut a still leg into specks.
+BRIDGE_STEP = 0.1
 
 
 def _margin(depth: npt.NDArray[np.float32], base: float) -> npt.NDArray[np.float32]:
@@ -243,6 +250,19 @@ def far_side_pixels(depth: npt.NDArray[np.float32], stride: int) -> npt.NDArray[
     far[:-1, :] |= z[1:, :] < lower[:-1, :]
     far[1:, :] |= z[:-1, :] < lower[1:, :]
     return far
+
+
+def bridge_dropouts(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_],
+                    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
+    """``depth`` and ``mask`` with the dropouts inside a surface bridged: a pixel without a
+    reading whose 3x3 neighbourhood holds pixels of ``mask`` that agree within
+    ``BRIDGE_STEP`` takes the nearest of their depths and joins the mask (not between a
+    person and what stands behind them, whose depths disagree)."""
+    box = np.ones((3, 3), np.uint8)
+    near = cv2.erode(np.where(mask, depth, np.inf).astype(np.float32), box)
+    far = cv2.dilate(np.where(mask, depth, 0).astype(np.float32), box)
+    fill = (depth <= 0) & np.isfinite(near) & (far - near <= np.float32(BRIDGE_STEP))
+    return np.where(fill, near, depth).astype(np.float32), mask | fill
 
 
 def strided_grey(color: npt.NDArray[np.uint8], shape: tuple[int, int]) -> npt.NDArray[np.uint8]:
@@ -565,8 +585,12 @@ class BackgroundModel:
         self._bg = bg
 
         upper = candidate if low is None else candidate & ~low
-        far_side = far_side_pixels(d, stride)
-        labels, edge = depth_components(d, upper, stride, far_side)
+        # Labelled across dropouts; the bridging pixels then belong to no component.
+        bridged, mask = bridge_dropouts(d, upper)
+        far_side = far_side_pixels(bridged, stride)
+        labels, edge = depth_components(bridged, mask, stride, far_side)
+        labels[~upper] = 0
+        edge &= upper
         self._labels = labels
         n = int(labels.max()) + 1
         total = np.bincount(labels.ravel(), minlength=n)
