@@ -144,22 +144,35 @@ def test_person_in_front_of_no_reading_is_found():
     assert all(c == 0 for _, c in found[20:])
 
 
-def test_robot_pedestal_stays_with_its_moving_arm():
-    """The whole connected part moves: a static pedestal joined to a moving arm is kept."""
+def _pedestal_with_arm(dropouts: bool) -> tuple[BackgroundModel, list[int]]:
+    """A static pedestal with an arm swinging up and down from its top, 45 frames; with
+    ``dropouts`` the sensor loses every fourth row of the pedestal (no reading). Returns the
+    model and the pedestal's foreground points per frame."""
     model = BackgroundModel()
     pedestal = []
     for k in range(45):
         depth = room().copy()
         paint(depth, -0.1, 0.1, 0.0, 0.9, 2.5)  # pedestal on the floor
-        angle = 0.8 * np.sin(k / 4.0)  # an arm swinging up and down from its top
+        lost = np.zeros(depth.shape, bool)
+        lost[::4] = dropouts
+        lost &= depth == np.float32(2.5)
+        angle = 0.8 * np.sin(k / 4.0)
         tip = (0.1 + 0.5 * np.cos(angle), 0.85 + 0.5 * np.sin(angle))
         arm = np.zeros(depth.shape, np.uint8)
         cv2.line(arm, (_u(0.1, 2.5), _v(0.85, 2.5)), (_u(tip[0], 2.5), _v(tip[1], 2.5)), 1,
                  thickness=_u(0.08, 2.5) - _u(0.0, 2.5))
         depth[arm > 0] = 2.5
-        est = estimate_frame(frame(k, depth), PARAMS, background=model)
+        f = frame(k, depth)
+        f.depth[lost & (arm == 0)] = 0.0  # no reading
+        est = estimate_frame(f, PARAMS, background=model)
         pedestal.append(int(np.count_nonzero((np.abs(est.points[:, 0]) < 0.1)
                                              & (est.points[:, 1] > CAMERA_HEIGHT - 0.6))))
+    return model, pedestal
+
+
+def test_robot_pedestal_stays_with_its_moving_arm():
+    """The whole connected part moves: a static pedestal joined to a moving arm is kept."""
+    model, pedestal = _pedestal_with_arm(dropouts=False)
     assert not model.learning
     assert min(pedestal[-20:]) > 20
 
@@ -169,26 +182,7 @@ def test_pedestal_with_dropouts_stays_with_its_moving_arm():
     dropouts): the dropouts would cut it into strips that never move, dropped once
     learning ends; bridged where the readings around them agree, it stays one part with the
     arm."""
-    model = BackgroundModel()
-    pedestal = []
-    for k in range(45):
-        depth = room().copy()
-        paint(depth, -0.1, 0.1, 0.0, 0.9, 2.5)
-        lost = np.zeros(depth.shape, bool)
-        lost[::4] = True
-        lost &= depth == np.float32(2.5)
-        angle = 0.8 * np.sin(k / 4.0)
-        tip = (0.1 + 0.5 * np.cos(angle), 0.85 + 0.5 * np.sin(angle))
-        arm = np.zeros(depth.shape, np.uint8)
-        cv2.line(arm, (_u(0.1, 2.5), _v(0.85, 2.5)), (_u(tip[0], 2.5), _v(tip[1], 2.5)), 1,
-                 thickness=_u(0.08, 2.5) - _u(0.0, 2.5))
-        depth[arm > 0] = 2.5
-        lost &= arm == 0
-        f = frame(k, depth)
-        f.depth[lost] = 0.0  # no reading
-        est = estimate_frame(f, PARAMS, background=model)
-        pedestal.append(int(np.count_nonzero((np.abs(est.points[:, 0]) < 0.1)
-                                             & (est.points[:, 1] > CAMERA_HEIGHT - 0.6))))
+    model, pedestal = _pedestal_with_arm(dropouts=True)
     assert not model.learning
     assert min(pedestal[-20:]) > 20
 
