@@ -220,6 +220,21 @@ def _colour_frame(k: int, depth: np.ndarray, person: np.ndarray, *, room_shift: 
                      color=color if with_colour else None)
 
 
+def _chair_room_step(model: BackgroundModel, k: int, draw, *, with_colour: bool = True):
+    """Frame ``k`` of the room with the chair and what ``draw(image)`` paints into a depth
+    image (the person, whose texture slides), taken by ``model`` with its colour as the
+    tracker does; returns the frame's estimate."""
+    depth = room().copy()
+    add_chair(depth)
+    alone = np.full(depth.shape, np.inf, np.float32)
+    for image in (depth, alone):
+        draw(image)
+    f = _colour_frame(k, depth, np.isfinite(alone), with_colour=with_colour)
+    est = estimate_frame(f, PARAMS, background=model)
+    model.observe_color(f.color, f.stamp_ns)
+    return est
+
+
 def _still_person_reaches_the_chair() -> list[tuple[int, int]]:
     """A person standing still in depth (swaying in colour) beside the chair from frame 0,
     who reaches for its backrest in the first frame after learning and keeps touching it
@@ -228,17 +243,12 @@ def _still_person_reaches_the_chair() -> list[tuple[int, int]]:
     model = BackgroundModel()
     out = []
     for k in range(40):
-        depth = room().copy()
-        add_chair(depth)
-        alone = np.full(depth.shape, np.inf, np.float32)
-        for image in (depth, alone):
+        def draw(image: np.ndarray, k: int = k) -> None:
             add_person(image, 0.0, 0.0, z=CHAIR_Z + 0.4)  # the backrest's depth
             if k >= 16:  # learning (0.5 s) is over: the forearm meets the backrest
                 lift = 0.02 * (k % 2)
                 paint(image, 0.25, CHAIR_X - 0.18, 0.85 + lift, 0.93 + lift, CHAIR_Z + 0.4)
-        f = _colour_frame(k, depth, np.isfinite(alone))
-        est = estimate_frame(f, PARAMS, background=model)
-        model.observe_color(f.color, f.stamp_ns)
+        est = _chair_room_step(model, k, draw)
         if model.learning:
             continue
         pts = est.points
@@ -266,15 +276,9 @@ def _runner_past_the_chair(with_colour: bool) -> list[int]:
     model = BackgroundModel()
     chair = []
     for k in range(60):
-        depth = room().copy()
-        add_chair(depth)
-        alone = np.full(depth.shape, np.inf, np.float32)
         x = -2.2 + 4.0 * (k % 30) / 30  # passes in front of the chair twice
-        add_person(alone, x, 0.3, z=1.5)
-        add_person(depth, x, 0.3, z=1.5)
-        f = _colour_frame(k, depth, np.isfinite(alone), with_colour=with_colour)
-        est = estimate_frame(f, PARAMS, background=model)
-        model.observe_color(f.color, f.stamp_ns)
+        est = _chair_room_step(model, k, lambda image, x=x: add_person(image, x, 0.3, z=1.5),
+                               with_colour=with_colour)
         chair.append(points_near(est.points, CHAIR_X, CHAIR_Z))
     return chair
 
@@ -292,15 +296,9 @@ def _walk_away(with_colour: bool) -> int:
     a fifth of the image at first: the camera motions detected."""
     model = BackgroundModel()
     for k in range(45):
-        depth = room().copy()
-        add_chair(depth)
-        alone = np.full(depth.shape, np.inf, np.float32)
-        z = 0.9 + 0.04 * k
-        add_person(alone, 0.03 * k, 0.3, z=z)
-        add_person(depth, 0.03 * k, 0.3, z=z)
-        f = _colour_frame(k, depth, np.isfinite(alone), with_colour=with_colour)
-        estimate_frame(f, PARAMS, background=model)
-        model.observe_color(f.color, f.stamp_ns)
+        _chair_room_step(model, k, lambda image, k=k: add_person(image, 0.03 * k, 0.3,
+                                                                 z=0.9 + 0.04 * k),
+                         with_colour=with_colour)
     return model.relearns
 
 
