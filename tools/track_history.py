@@ -43,7 +43,8 @@ from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.tracker import Tracker
 from endeff_ros.evaluate import gt_ids, is_person_sequence
-from endeff_ros.scoring import kinds_of_ids, score_frame
+from endeff_ros.scoring import kinds_of_ids
+from tools.pan_check import matched_ids
 from tools.per_bag import parse_bag_args, run_per_bag
 
 NEAR_M = 0.3
@@ -118,16 +119,16 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
             keys = frame_ids if aligned else np.arange(len(gt))
             kinds = (kinds_of_ids(frame_ids, person=person) if aligned
                      else np.full(len(gt), 'unknown'))
-            positions = np.array([t.position for t in tracks]).reshape(-1, 3)
-            matched = {g: e for e, g in score_frame(positions, gt).matches}
-            matched_ids = {tracks[e].id for e in matched.values()}
+            matched, _ = matched_ids(np.array([t.position for t in tracks]),
+                                     [t.id for t in tracks], gt, frame_ids)
+            matched_tracks = set(matched.values())
             by_id = {t.id: t for t in tracks}
             for g in range(len(gt)):
                 key, kind = int(keys[g]), str(kinds[g])
                 h = history.setdefault(kind, dict.fromkeys(HISTORY, 0))
-                if g in matched:
+                if key in matched:
                     h['found'] += 1
-                    last[key] = (index, tracks[matched[g]].id)
+                    last[key] = (index, matched[key])
                     continue
                 if key not in last:
                     h['never'] += 1
@@ -141,7 +142,7 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
                 track = by_id.get(track_id)
                 if track is None:
                     cls = why_dropped.get(track_id, 'gone_duplicate')
-                elif track_id in matched_ids:
+                elif track_id in matched_tracks:
                     cls = 'matched_other'
                 else:
                     near = np.linalg.norm(track.position - gt[g]) <= NEAR_M
