@@ -291,6 +291,35 @@ def test_colour_of_a_runner_that_left_does_not_move_the_chair():
     assert max(_runner_past_the_chair(with_colour=True)[20:]) == 0
 
 
+def _walker_passes_behind_the_chair() -> list[tuple[int, int]]:
+    """A person walks (1.2 m/s) behind the chair, 0.1 m behind its backrest, from its left
+    to its right, and stops there (frame 50) with their left arm behind the backrest's right
+    end: one component with the chair from then on. Per frame: (points of the chair's left
+    half, the person's points)."""
+    model = BackgroundModel()
+    out = []
+    for k in range(80):
+        x = min(-0.2 + 0.04 * max(k - 16, 0), 1.15)
+        est = _chair_room_step(model, k, lambda image, x=x: add_person(image, x, 0.3,
+                                                                       z=CHAIR_Z + 0.5))
+        pts = est.points
+        left_half = ((pts[:, 0] > CHAIR_X - 0.25) & (pts[:, 0] < CHAIR_X)
+                     & (np.abs(pts[:, 2] - CHAIR_Z - 0.2) < 0.25)  # not the person's
+                     & (pts[:, 1] > CAMERA_HEIGHT - 0.97))
+        out.append((int(np.count_nonzero(left_half)), points_near(pts, 1.15, CHAIR_Z + 0.3)))
+    return out
+
+
+def test_furniture_a_walker_stirred_past_is_background_again_once_they_are_gone():
+    """While the walker passes behind the chair their stirring releases its certified
+    pixels (COLOR_RELEASE_PX), and the chair joins them; once no stirring has been near a
+    released pixel for STATIC_S and it kept its depth, it is static again, although the
+    chair stays one component with the person standing beside it."""
+    out = _walker_passes_behind_the_chair()
+    assert min(chair for chair, _ in out[46:52]) > 50  # released: they have just passed
+    assert all(chair == 0 and person > 300 for chair, person in out[66:]), out[66:]
+
+
 def _walk_away(with_colour: bool) -> int:
     """A person 0.9 m from the camera walks away and to the side (1.2 m/s, 0.9 m/s), covering
     a fifth of the image at first: the camera motions detected."""

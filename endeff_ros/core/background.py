@@ -54,10 +54,13 @@ background model removes what never moved, with the person present from the firs
   of its pixels in one frame (colour and depth edges differ by a pixel), and a hold would
   keep the lamp for half a second. Certified-static pixels (below) within
   ``COLOR_RELEASE_PX`` of a stirred pixel are released: a person certified while standing
-  still moves again. No colour evidence in a frame when a third of the image changed by
-  ``COLOR_MIN_STEP`` or more than ``COLOR_OUTSIDE_FRACTION`` of what holds no entity (floor,
-  walls, beyond the box) did: the light changed, or the camera moved (while a pan settles,
-  every texture edge stirs).
+  still moves again. A released pixel at its certified depth only restarts its clock, and
+  is static again after ``STATIC_S`` without stirring near it: a walker who passed behind a
+  chair released its pixels along their outline, and standing beside it they keep it one
+  component with them, so the chair would otherwise never certify again. No colour
+  evidence in a frame when a third of the image changed by ``COLOR_MIN_STEP`` or more than
+  ``COLOR_OUTSIDE_FRACTION`` of what holds no entity (floor, walls, beyond the box) did: the
+  light changed, or the camera moved (while a pan settles, every texture edge stirs).
   Neither counts the pixels whose depth turned farther: what left them (a person walking
   away, uncovering the wall) changed their colour, not the light. Without colour (none in
   the stream, or this frame's was lost) depth alone decides. What stays static in depth but
@@ -185,7 +188,7 @@ COLOR_GLOBAL_FRACTION = 0.3
 #: stirred: the same, for a change too small for the whole image to show it.
 COLOR_OUTSIDE_FRACTION = 0.01
 #: Certified-static pixels within this many pixels (strided image) of a stirred one are
-#: released.
+#: released (their certification restarts).
 COLOR_RELEASE_PX = 4
 #: A component that moves by colour alone renews the hold (HOLD_S) only where the same
 #: surface (depth within the margin) also moved by colour within this time before: one
@@ -655,9 +658,14 @@ class BackgroundModel:
         gone = fg & ~margin_ok & (changed | (d > self._static_z + margin))
         if stirred is not None:
             # ... or it stirs: a person who stood still long enough to be certified (from the
-            # start, or in a pause) and moves again by less than the margin.
+            # start, or in a pause) and moves again by less than the margin. Where it kept its
+            # depth, only its clock restarts: once nothing stirs near it for STATIC_S it is
+            # static again (the chair a walker brushed past, joined to them while they stand
+            # beside it, would otherwise never certify again).
             k = 2 * COLOR_RELEASE_PX + 1
-            gone |= fg & cv2.dilate(stirred.view(np.uint8), np.ones((k, k), np.uint8)).view(bool)
+            near = fg & cv2.dilate(stirred.view(np.uint8), np.ones((k, k), np.uint8)).view(bool)
+            self._static_since[near & margin_ok] = t
+            gone |= near & ~margin_ok
         self._static_z[gone] = 0
         static = (self._static_z > 0) & margin_ok & (t - self._static_since >= STATIC_S)
         out = (fg & ~(static & ~changed)) | (edge & changed)
