@@ -7,26 +7,17 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from endeff_ros.bag.errors import BagError
+from endeff_ros.bag.reader import find_bags
 from endeff_ros.cli_common import load_params_option
 from endeff_ros.core.params import EndeffParams
 
 
-def bag_paths(args: Sequence[str], every: int = 1) -> list[Path]:
-    """The bags named by ``args`` (bag folders, or folders holding bag folders: each with a
-    ``metadata.yaml``), sorted by path, every ``every``-th."""
-    bags: list[Path] = []
-    for arg in map(Path, args):
-        if (arg / 'metadata.yaml').is_file():
-            bags.append(arg)
-        else:
-            bags.extend(sorted(q.parent for q in arg.glob('*/metadata.yaml')))
-    return sorted(bags)[::max(1, every)]
-
-
 def parse_bag_args(doc: str, argv: list[str] | None, name: str,
                    ) -> tuple[argparse.Namespace, list[Path], EndeffParams | None]:
-    """The command line of a per-bag tool (bags or folders, ``--every``, ``--params``,
-    ``--jobs``, ``--json``): the parsed arguments, the bags and the parameters. ``doc``: the
+    """The command line of a per-bag tool (bags or folders searched for bags as ``endeff
+    eval`` does, ``--every``, ``--params``, ``--jobs``, ``--json``): the parsed arguments, the
+    bags (sorted by path, every ``--every``-th) and the parameters. ``doc``: the
     tool's docstring (its first line describes it); ``name``: the tool's name for errors."""
     parser = argparse.ArgumentParser(description=doc.split('\n')[0])
     parser.add_argument('bags', nargs='+', help='bags, or folders holding bags')
@@ -36,9 +27,10 @@ def parse_bag_args(doc: str, argv: list[str] | None, name: str,
     parser.add_argument('--json', help='also write the report here')
     args = parser.parse_args(argv)
     params = load_params_option(args.params, name)
-    bags = bag_paths(args.bags, args.every)
-    if not bags:
-        parser.error('no bags (folders with metadata.yaml) given')
+    try:
+        bags = sorted(find_bags(args.bags))[::max(1, args.every)]
+    except BagError as exc:
+        parser.error(f'no bags: {exc}')
     return args, bags, params
 
 
