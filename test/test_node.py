@@ -251,7 +251,7 @@ def test_runtime_parameters(harness):
     assert h.wait_clouds(1)
     assert h.tracker.params_seen[-1].band_delta == 0.12
     for name, value, reason in [('band_delta', 5.0, 'range'),
-                                ('box_min_z', 5.0, 'box_min_z'),
+                                ('box_min_z', 6.0, 'box_min_z'),  # beyond box_max_z
                                 ('flow_method', 'farneback', 'read-only'),
                                 ('min_entity_points', 1.5, 'type')]:
         result = h.node.set_parameters([Parameter(name, value=value)])[0]

@@ -93,7 +93,7 @@ def test_a_pair_renders_the_same_person_and_only_adds_furniture(clips, specs):
                         for s in specs[:2])
     ren_e, ren_f = BagRenderer(empty, byname), BagRenderer(furnished, byname)
     assert ren_e.clutter == [] and len(ren_f.clutter) >= 2
-    box = lambda d: np.isfinite(d) & (d < 4.3)  # noqa: E731  the default foreground box depth
+    box = lambda d: np.isfinite(d) & (d < 4.3)  # noqa: E731  where room.scatter places pieces
     for fe, ff in zip(ren_e.frames(), ren_f.frames(), strict=True):
         assert (fe.stamp_ns, fe.color_stamp_ns) == (ff.stamp_ns, ff.color_stamp_ns)
         np.testing.assert_array_equal(fe.gt, ff.gt)

@@ -31,8 +31,10 @@ class EndeffParams:
     """All tuning parameters; defaults suit a person 1-4 m from a Kinect/RealSense-class camera."""
 
     # --- Section 3: depth to foreground cloud -------------------------------------------------
-    # x +-3.5 m spans 78 degrees at the box's 4.3 m depth: the sides do not cut people whom a
-    # wide-angle sensor (D435/D455 87 degrees) sees within its depth (docs/design.md).
+    # x +-3.5 m: the sides do not cut people whom a wide-angle sensor (D435/D455, 87 degrees)
+    # sees 2-3 m to the side. z to 5.25 m: people walking away from the camera stay in view
+    # past 4 m, and the static background removes the room that comes in with them; deeper,
+    # the false positives grew faster than the labels found (docs/design.md, "The box").
     box_min_x: float = _p(-3.5, 'Foreground box, minimum x (optical frame, right).', unit='m',
                           lo=-20.0, hi=20.0)
     box_max_x: float = _p(3.5, 'Foreground box, maximum x.', unit='m', lo=-20.0, hi=20.0)
@@ -40,7 +42,7 @@ class EndeffParams:
                           lo=-20.0, hi=20.0)
     box_max_y: float = _p(2.0, 'Foreground box, maximum y.', unit='m', lo=-20.0, hi=20.0)
     box_min_z: float = _p(0.4, 'Foreground box, minimum z (depth).', unit='m', lo=0.0, hi=20.0)
-    box_max_z: float = _p(4.3, 'Foreground box, maximum z (depth).', unit='m', lo=0.0, hi=20.0)
+    box_max_z: float = _p(5.25, 'Foreground box, maximum z (depth).', unit='m', lo=0.0, hi=20.0)
     pixel_stride: int = _p(2, 'Use every n-th pixel in u and v before back-projection.',
                            lo=1, hi=8)
     depth_median: bool = _p(False, '3x3 median filter on the depth image before back-projection '
