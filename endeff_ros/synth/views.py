@@ -30,8 +30,9 @@ VIEWS = ('front', 'side', 'back', 'across', 'towards')
 MIN_TRAVEL_M = 0.4
 NEAREST_M = 1.0  # an approaching walk stops this far (horizontally) from the camera
 # The activity area a robot user sets the foreground box to: people stay between NEAREST_M and
-# FARTHEST_M (horizontal pelvis distance) throughout a segment, so that the default box (depth
-# up to 4.3 m) holds them with their limbs; a person beyond it is outside the area by design.
+# FARTHEST_M (horizontal pelvis distance) throughout a segment, so that a box 4.3 m deep (the
+# default when the suite was made; 5.25 m now) holds them with their limbs; a person beyond it
+# is outside the area by design.
 FARTHEST_M = 4.0
 _J = JOINT_INDEX
 
