@@ -20,7 +20,7 @@ from endeff_ros.core.types import KINECT_640 as K
 from endeff_ros.core.types import RGBDFrame
 
 CAMERA_HEIGHT = 1.1
-WALL_Z = 4.0  # inside the default box (5.25 m): without a background model it is foreground
+WALL_Z = 4.0  # inside the default box: without a background model it is foreground
 PERSON_Z = 2.6
 CHAIR_X, CHAIR_Z = 0.7, 2.2
 DT_NS = 33_333_333

@@ -12,7 +12,7 @@ from endeff_ros.core.types import KINECT_640 as K
 
 # Only the rule under test: no floor, no background, every strided pixel a point.
 PARAMS = EndeffParams(background=False, floor_removal=False, voxel_size=0.0)
-FAR = 6.0  # beyond the box (5.25 m): no reading of the room behind
+FAR = 6.0  # beyond the default box's far face: no reading of the room behind
 
 
 def empty(z: float = FAR) -> np.ndarray:
