@@ -55,6 +55,10 @@ from endeff_ros.synth.render import Camera
 #: end lies on the part, pushed behind its visible surface by the part radius (Section 4): the
 #: measured errors are 0.7-4.1 cm.
 TIP_TOLERANCE = 0.05
+#: m, the chair's legs: their ground truth is the leg's foot (3 cm up), but a leg is a long
+#: part, whose centre the estimator reports deeper than its rounded end (the rule that puts a
+#: hand's centre inside the palm, ``_tip_positions``): the measured errors are 4.3-7.5 cm.
+CHAIR_TOLERANCE = 0.08
 #: m, the robot arm's ground truth: its terminal parts end far from their centres (the fingers
 #: reach 0.12 m beyond the gripper's centre, the pedestal's bottom corners 0.17 m from its
 #: bottom centre), so the found ends lie 8.5-14.4 cm from the ground truth (the suite's
@@ -147,7 +151,7 @@ def scored(kind):
     """The ground-truth ids a scene test scores (the chair's backrest corners are no ends:
     test_chair_backrest_corners) and their tolerance."""
     return (CHAIR_LEGS if kind == 'chair' else slice(None),
-            ARM_TOLERANCE if kind == 'arm' else TIP_TOLERANCE)
+            {'arm': ARM_TOLERANCE, 'chair': CHAIR_TOLERANCE}.get(kind, TIP_TOLERANCE))
 
 
 CASES = [
@@ -196,6 +200,34 @@ def test_every_end_effector_found_on_its_part(kind, arg, variant):
     assert np.all(errors < tolerance), f'errors {np.round(errors, 3)}'
     limit = ON_GRIPPER if kind == 'arm' else ON_PART
     assert np.all(on_part <= limit), f'distance to the part {np.round(on_part, 3)}'
+
+
+@pytest.mark.parametrize('yaw', [0.0, 0.35])
+def test_a_hand_is_reported_at_its_centre_and_a_head_at_its_rounded_end(yaw):
+    """A hand is a long part: its centre (the ground truth, inside the palm) lies deeper
+    than its rounded end, and the candidate is shifted there along the part's axis, by at
+    most the part radius. A head is a round end: little or no shift. The tracker follows the
+    rounded end (``end_centre``)."""
+    est, shot = estimated('person', 't_pose', yaw)
+    cands = [c for e in est.entities for c in e.candidates]
+    positions = np.array([c.position for c in cands])
+    for k in (HEAD, LEFT_HAND, RIGHT_HAND):
+        c = cands[int(np.argmin(np.linalg.norm(positions - shot.gt[k], axis=1)))]
+        shift = np.linalg.norm(c.centre_shift)
+        assert shift <= EndeffParams().max_part_radius + 1e-9
+        np.testing.assert_allclose(c.end_centre + c.centre_shift, c.position)
+        # The shift never takes an end away from its part's centre; a head moves little.
+        assert (np.linalg.norm(c.position - shot.gt[k])
+                <= np.linalg.norm(c.end_centre - shot.gt[k]) + 1e-3)
+        if k == HEAD:
+            assert shift < 0.015, shift
+    hands = [cands[int(np.argmin(np.linalg.norm(positions - shot.gt[k], axis=1)))]
+             for k in (LEFT_HAND, RIGHT_HAND)]
+    assert max(np.linalg.norm(c.centre_shift) for c in hands) > 0.02  # a hand is shifted
+    if yaw == 0.0:  # both hands seen along their length: within 2 cm of their centres
+        errors = tip_errors(shot.gt[[LEFT_HAND, RIGHT_HAND]],
+                            np.array([c.position for c in hands]))
+        assert errors.max() < 0.02, errors
 
 
 @pytest.mark.parametrize('kind, arg, variant', [
@@ -311,7 +343,7 @@ def test_chair_seen_by_a_camera_pitched_down(x):
     assert np.all((uv >= 0) & (uv < [640, 480]))  # premise: every end-effector is in view
     est = estimate_frame(shot.frame, EndeffParams())
     assert len(est.positions()) <= len(shot.gt)
-    assert np.all(tip_errors(shot.gt[CHAIR_LEGS], est.positions()) < TIP_TOLERANCE)
+    assert np.all(tip_errors(shot.gt[CHAIR_LEGS], est.positions()) < CHAIR_TOLERANCE)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -912,7 +944,7 @@ def test_candidates_carry_consistent_geodesics():
         assert c.geodesic == pytest.approx(np.linalg.norm(np.diff(c.path, axis=0), axis=1).sum())
         mid = c.path[len(c.path) // 2]
         assert c.geodesic_approx == pytest.approx(
-            np.linalg.norm(c.position - mid) + np.linalg.norm(mid - entity.root))
+            np.linalg.norm(c.end_centre - mid) + np.linalg.norm(mid - entity.root))
         # Eq. 6 is at least the straight line from the end-effector node to the root node,
         # and at least the lowest protrusion accepted (g, or the chain threshold below it).
         assert c.geodesic >= np.linalg.norm(c.path[0] - c.path[-1]) - 1e-9

@@ -408,6 +408,21 @@ def test_still_person_keeps_every_id():
             assert d < TOL and t.id == first[k], (i, k, first, r.ids(i))
 
 
+def test_tracks_publish_the_part_centre():
+    """A detected track is published where its candidate's part centre is (a hand inside its
+    palm), although the tracker follows the rounded end (``Candidate.end_centre``)."""
+    r = run(still(), EndeffParams(keep_frames=5), single=False)
+    shifted = 0
+    for res in r.results:
+        cands = [c for e in res.estimate.entities for c in e.candidates]
+        centres = np.array([c.position for c in cands]).reshape(-1, 3)
+        for t in res.tracks:
+            if t.state == Track.DETECTED:
+                assert np.linalg.norm(centres - t.position, axis=1).min() < 1e-9
+        shifted += sum(np.linalg.norm(c.centre_shift) > 0.01 for c in cands)
+    assert shifted  # premise: some parts are long (the hands)
+
+
 def test_track_state_age_confidence():
     keep = 4
     r = run(star_limb_vanishes(5, 7), EndeffParams(keep_frames=keep, max_rectify_distance=REACH),

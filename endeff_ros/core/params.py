@@ -121,8 +121,9 @@ class EndeffParams:
                              'it is where the view or the box cuts the body, not an end.')
     cut_margin_px: int = _p(3, 'How close (pixels) to the image border a sub-band counts as '
                             'cut by it.', unit='px', lo=0, hi=100)
-    tip_depth: float = _p(0.1, 'An end-effector is the centroid of its branch within this '
-                          'geodesic depth of the extreme.', unit='m', lo=0.0, hi=1.0)
+    tip_depth: float = _p(0.14, 'Geodesic depth of the terminal part behind its extreme: '
+                          'its points give the part radius, axis and centre.', unit='m',
+                          lo=0.0, hi=1.0)
 
     max_part_radius: float = _p(0.1, 'Cap on the terminal-part radius used to move the '
                                 'end-effector from the visible surface to the part centre; '

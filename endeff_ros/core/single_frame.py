@@ -164,14 +164,15 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
                                                        chain_min_points=params.subband_min_points,
                                                        max_count=params.max_end_effectors)]
     dist_root = [graph.dist[subband[seeds[e]], path] for e, _, path, _ in found]
-    positions = _tip_positions(points, subband, graph, [f[2] for f in found], dist_root, params)
+    positions, shifts = _tip_positions(points, subband, graph, [f[2] for f in found],
+                                       dist_root, params)
     candidates: list[list[Candidate]] = [[] for _ in seeds]
-    for (e, node, path, protrusion), position in zip(found, positions):
+    for (e, node, path, protrusion), position, shift in zip(found, positions, shifts):
         root = points[seeds[e]]
         candidates[e].append(Candidate(
             position=position, node=node, geodesic=geodesic(graph, path),
-            geodesic_approx=approximate_geodesic(position, graph, path, root),
-            path=graph.centroids[path], protrusion=protrusion))
+            geodesic_approx=approximate_geodesic(position - shift, graph, path, root),
+            path=graph.centroids[path], protrusion=protrusion, centre_shift=shift))
     entities = [EntityEstimate(entity=e, root=points[seed], candidates=candidates[e],
                                graph=graph, point_index=np.flatnonzero(entity == e),
                                root_node=int(subband[seed]))
@@ -295,7 +296,8 @@ def _group_quantile(values: npt.NDArray[np.float64], group: npt.NDArray[np.intp]
 def _tip_positions(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
                    graph: TopologyGraph, paths: list[npt.NDArray[np.intp]],
                    dist_root: list[npt.NDArray[np.float64]],
-                   params: EndeffParams) -> npt.NDArray[np.float64]:
+                   params: EndeffParams) -> tuple[npt.NDArray[np.float64],
+                                                  npt.NDArray[np.float64]]:
     """End-effector positions: the centre of each terminal part, not its outermost sliver.
 
     ``paths[m]`` runs from end-effector ``m``'s node to its root, ``dist_root[m]`` holds the
@@ -305,16 +307,26 @@ def _tip_positions(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp
     lies about one radius r behind that surface along the viewing ray; r is estimated from
     the visible width of the part across its axis (10th-90th percentile width / 1.6, exact
     for points uniform across a cylinder's silhouette) and capped at ``max_part_radius``.
-    Along the part's axis (in the image plane) the centre is one radius inside the extreme,
-    the 2 % quantile of the tip points along that axis: the centre of the rounded end,
-    wherever the tip region's centroid falls. Set ``max_part_radius`` to 0 to report the
-    surface centroid (docs/design.md: what the centre model buys). All end-effectors of the
-    frame at once: per-point arrays labelled by end-effector, bincounts and one sort per
-    quantile (one pass per end-effector cost ~0.2 ms each).
+
+    Along the part's axis (in the image plane) a rounded end's centre lies one radius inside
+    the extreme, the 2 % quantile of the tip points along that axis: the centre of a head,
+    wherever the tip region's centroid falls. A long part's centre lies deeper: a hand's is
+    about half its length (9 cm) from the finger tips, more than its radius (3-4 cm). So the
+    reported centre lies at the tip region's centroid along the axis, but between one radius
+    (a round end) and one diameter (a part twice as long as wide: a hand, a shoe, a gripper)
+    inside the extreme; the diameter bounds it where the tip region runs on into the next
+    link or the radius is overestimated. Returns the centres (M, 3) and, for each, the shift
+    along the axis from its rounded end's centre (M, 3), which the tracker follows: a
+    stable point that does not move with the length of part that happens to be visible
+    (docs/design.md: what the centre model buys). Set ``max_part_radius`` to 0 to report the
+    surface centroid. All end-effectors of the frame at once: per-point arrays labelled by
+    end-effector, bincounts and one sort per quantile (one pass per end-effector cost ~0.2 ms
+    each).
     """
     m = len(paths)
+    no_shift = np.zeros((m, 3))
     if m == 0:
-        return np.zeros((0, 3))
+        return no_shift, no_shift
     near = [path[d >= d[0] - params.tip_depth] for path, d in zip(paths, dist_root)]
     inner = np.array([path[min(len(path) - 1, len(n))] for path, n in zip(paths, near)])
     # Points of each terminal part, labelled by end-effector (parts may share nodes).
@@ -330,14 +342,14 @@ def _tip_positions(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp
     centre = np.stack([np.bincount(owner, weights=tip[:, a], minlength=m) for a in range(3)],
                       axis=1) / np.maximum(counts, 1)[:, None]
     if params.max_part_radius <= 0:
-        return centre
+        return centre, no_shift
     ray = centre / np.linalg.norm(centre, axis=1, keepdims=True)
     inward = graph.centroids[inner] - centre
     across = np.cross(inward, ray)
     norm = np.linalg.norm(across, axis=1)
     usable = (norm >= 1e-9) & (counts >= 3)
     if not usable.any():
-        return centre
+        return centre, no_shift
     rel = tip - centre[owner]
     x = np.einsum('ij,ij->i', rel, across[owner] / np.maximum(norm, 1e-9)[owner, None])
     safe = np.maximum(counts, 1)
@@ -351,8 +363,10 @@ def _tip_positions(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp
     axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-9)
     extreme = _group_quantile(np.einsum('ij,ij->i', rel, axis[owner]), owner, starts, safe,
                               0.02)
-    moved = centre + (extreme + radius)[:, None] * axis + radius[:, None] * ray
-    return np.where(usable[:, None], moved, centre)
+    end = centre + (extreme + radius)[:, None] * axis + radius[:, None] * ray
+    shift = (np.clip(-extreme, radius, 2.0 * radius) - radius)[:, None] * axis
+    usable = usable[:, None]
+    return np.where(usable, end + shift, centre), np.where(usable, shift, 0.0)
 
 
 class _StageTimer:

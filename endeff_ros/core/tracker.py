@@ -10,7 +10,10 @@ Per frame t+1:
    a node of the current topology graph (and its entity). Tracks are predicted and rectified
    through their surface anchor (an end-effector lies a part radius behind the surface). A
    prediction farther than ``max_rectify_distance`` from every point has left the foreground
-   and is dropped.
+   and is dropped. Tracks follow the centre of their part's rounded end
+   (``Candidate.end_centre``) and publish the part's centre, which for a long part such as a
+   hand lies deeper along its axis (``Candidate.centre_shift``, kept by predictions): how
+   much of a part is visible moves its centre, not the point that is tracked.
 4. **Correspondence**: similarity between a prediction and a candidate is inversely
    proportional to their geodesic distance in the current graph,
    ``s = 1 / (1 + d_G / similarity_scale)``; the Hungarian algorithm (scipy) maximises it.
@@ -101,6 +104,9 @@ class _TrackState:
     detected: bool = True
     offset: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     hits: int = 1  # frames in which a current candidate supported the track
+    # From ``position`` (the rounded end's centre, which is tracked) to the part centre
+    # published; a prediction keeps the last detection's (Candidate.centre_shift).
+    centre_shift: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
 
 
 @dataclass(frozen=True)
@@ -332,7 +338,8 @@ class Tracker:
                 g = estimate.graph.geodesic_between([preds[i].node for i in rows],
                                                     [c.node for c in cands])
                 euclid = np.linalg.norm(np.array([preds[i].position for i in rows])[:, None]
-                                        - np.array([c.position for c in cands])[None], axis=2)
+                                        - np.array([c.end_centre for c in cands])[None],
+                                        axis=2)
                 geo[rows] = np.maximum(g, euclid)
         sim = 1.0 / (1.0 + geo / self.params.similarity_scale)
         return sim, geo
@@ -380,7 +387,7 @@ class Tracker:
                 else:
                     # The memorised end-effector wins (Fig. 7b); the candidate is dropped.
                     self._take_prediction(track, pr, pred_geo, missed=False)
-                    if np.linalg.norm(cand.position - pr.position) < p.similarity_scale:
+                    if np.linalg.norm(cand.end_centre - pr.position) < p.similarity_scale:
                         # ... unless it is where the prediction is: then it is this
                         # end-effector seen again (a hand leaving the body, its geodesic
                         # distance still short), and the track takes its position.
@@ -399,12 +406,12 @@ class Tracker:
                 self._take_prediction(track, pr, pred_geo, missed=True)
                 survivors.append(track)
         new = [j for j in range(len(cands)) if j not in used_cands]
-        ids = self._revived_ids([cands[j].position for j in new])
+        ids = self._revived_ids([cands[j].end_centre for j in new])
         for j, track_id in zip(new, ids):
             cand = cands[j]
             survivors.append(_TrackState(
-                id=track_id, position=cand.position, geodesic=cand.geodesic_approx,
-                entity=cand_entity[j], path=cand.path))
+                id=track_id, position=cand.end_centre, geodesic=cand.geodesic_approx,
+                entity=cand_entity[j], path=cand.path, centre_shift=cand.centre_shift))
         return self._drop_duplicates(survivors)
 
     def _revived_ids(self, positions: list[npt.NDArray[np.float64]]) -> list[int]:
@@ -460,7 +467,8 @@ class Tracker:
     @staticmethod
     def _take_detection(track: _TrackState, cand: Candidate, entity: int, *,
                         related: bool) -> None:
-        track.position = cand.position
+        track.position = cand.end_centre
+        track.centre_shift = cand.centre_shift
         if related:
             # Case A: the pair is one end-effector and the longer geodesic distance is
             # selected; with α = σ^0 = 1 the memorised one survives (Eq. 8), which keeps a
@@ -491,7 +499,8 @@ class Tracker:
     def _reacquire(track: _TrackState, cand: Candidate) -> None:
         """A case-B track whose memory won keeps it, but takes the position of a candidate
         lying where it was predicted."""
-        track.position = cand.position
+        track.position = cand.end_centre
+        track.centre_shift = cand.centre_shift
         track.path = cand.path
         track.hits += 1
         track.detected = True
@@ -504,7 +513,8 @@ class Tracker:
         p = self.params
         confidence = (p.memory_sigma ** t.not_related
                       * (p.keep_frames + 1 - t.missed) / (p.keep_frames + 1))
-        return Track(id=t.id, entity=t.entity, position=np.array(t.position, dtype=np.float64),
+        return Track(id=t.id, entity=t.entity,
+                     position=np.array(t.position + t.centre_shift, dtype=np.float64),
                      geodesic=float(t.geodesic), confidence=float(np.clip(confidence, 0, 1)),
                      state=Track.DETECTED if t.detected else Track.PREDICTED, age=t.age,
                      path=t.path)

@@ -101,7 +101,10 @@ class Candidate:
     ``geodesic_approx`` is Eq. 7 (through the mid-band of that path); ``path`` holds the
     sub-band centroids from the end-effector to the root, (K, 3); ``protrusion`` is its
     geodesic distance to the root and the earlier end-effectors' paths when the iterated
-    Dijkstra found it (compared with g).
+    Dijkstra found it (compared with g). ``position`` is the centre of the terminal part;
+    ``centre_shift`` leads to it along the part's axis from the centre of its rounded end (one
+    radius inside the extreme), the point the tracker follows: zero for a round end such as a
+    head, up to one part radius for a long one such as a hand.
     """
 
     position: npt.NDArray[np.float64]
@@ -110,6 +113,13 @@ class Candidate:
     geodesic_approx: float
     path: npt.NDArray[np.float64]
     protrusion: float = 0.0
+    centre_shift: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def end_centre(self) -> npt.NDArray[np.float64]:
+        """The centre of the rounded end: what the tracker follows (``position`` less
+        ``centre_shift``)."""
+        return self.position - self.centre_shift
 
 
 @dataclass(frozen=True)
