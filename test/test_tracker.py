@@ -17,6 +17,7 @@ end-effector is kept T frames; ids over two people; track fields; and on the syn
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 
@@ -24,10 +25,11 @@ import numpy as np
 import pytest
 import scenarios as sc
 
+from endeff_ros.core.graph import approximate_geodesic
 from endeff_ros.core.params import EndeffParams as _EndeffParams
 from endeff_ros.core.single_frame import FrameEstimate, estimate_frame
-from endeff_ros.core.tracker import Tracker, TrackerResult
-from endeff_ros.core.types import RGBDFrame, Track
+from endeff_ros.core.tracker import CASE_B_HOLD_FACTOR, Tracker, TrackerResult
+from endeff_ros.core.types import Candidate, RGBDFrame, Track
 from endeff_ros.scoring import MATCH_THRESHOLD_M, SequenceScorer, score_frame
 
 
@@ -295,6 +297,47 @@ def test_unmatched_limb_kept_no_longer_than_it_was_seen(seen):
     kept = [i for i in range(gone, len(shots)) if r.track(i, tid) is not None]
     want = list(range(gone, gone + seen)) if seen >= params.confirm_hits else []
     assert kept == want, r.table(tid, 0)
+
+
+@pytest.mark.parametrize('seen', [3, 5])
+def test_case_b_memory_wins_no_longer_than_twice_it_was_seen(seen):
+    """Case B keeps the memorised end-effector against a current candidate with a shorter
+    geodesic distance (Fig. 7b), but for at most ``CASE_B_HOLD_FACTOR`` (2) times as many
+    frames as detections supported the track: then the candidate wins (Fig. 7c) and the
+    track follows it. Here a star limb's end is detected ``seen`` times, then the frame's
+    candidate on that limb lies 0.22 m further in (the same depth image, so the prediction
+    stays at the end)."""
+    shot = star_limb_vanishes(1, 0)[0]
+    params = EndeffParams(keep_frames=8)
+    est = estimate_frame(shot.frame, params)
+    ent = est.entities[0]
+    tip = sc.star_tip(5, 0)
+    k = int(np.argmin([np.linalg.norm(c.position - tip) for c in ent.candidates]))
+    end, g = ent.candidates[k], ent.graph
+    nodes = [int(np.argmin(np.linalg.norm(g.centroids - p, axis=1))) for p in end.path]
+    depth = g.dist[nodes[0], nodes]
+    j = int(np.argmin(np.abs(depth - 0.22)))
+    inner = Candidate(position=g.centroids[nodes[j]], node=nodes[j],
+                      geodesic=end.geodesic - depth[j],
+                      geodesic_approx=approximate_geodesic(g.centroids[nodes[j]], g,
+                                                           np.array(nodes[j:]), ent.root),
+                      path=end.path[j:])
+    assert inner.geodesic_approx < end.geodesic_approx  # premise: the memory is longer
+    moved = dataclasses.replace(est, entities=[dataclasses.replace(ent, candidates=[
+        inner if i == k else c for i, c in enumerate(ent.candidates)])])
+    tracker = Tracker(params)
+    for _ in range(seen):
+        res = tracker.update(shot.frame, estimate=est)
+    tid = min(res.tracks, key=lambda t: np.linalg.norm(t.position - tip)).id
+    limit = int(CASE_B_HOLD_FACTOR * seen)
+    held = []
+    for _ in range(limit + 4):
+        t = next(t for t in tracker.update(shot.frame, estimate=moved).tracks if t.id == tid)
+        held.append(t.state == Track.PREDICTED and np.linalg.norm(t.position - tip) < 0.05)
+        if not held[-1]:  # the candidate won: the track is detected on it
+            assert t.state == Track.DETECTED
+            assert np.linalg.norm(t.position - inner.position) < 1e-9
+    assert held == [True] * limit + [False] * 4
 
 
 @pytest.mark.parametrize('keep', [2, 4])

@@ -22,11 +22,13 @@ Per frame t+1:
    two to the root (times ``unrelated_ratio``): two real end-effectors are farther apart than
    either is from the root, so they are not compared; everything else is *unmatched* (case C).
 6. **Selection**: in case B the candidate with the longer approximate geodesic distance
-   (Eq. 7, memorised by Eq. 8 for predictions) survives; a case-C prediction is kept at most
-   T frames; an unmatched current candidate starts a new track. In case A the pair is one
-   end-effector: the longer geodesic distance is kept, the position is the current detection
-   (the paper favours "the natural detection of end-effectors"; the prediction only guides it
-   when needed).
+   (Eq. 7, memorised by Eq. 8 for predictions) survives, a memorised one for at most twice as
+   many consecutive frames as detections ever supported its track (the paper's warning that
+   memory must not get stuck with errors); a case-C prediction is kept at most T frames, and
+   no longer than it was detected; an unmatched current candidate starts a new track. In
+   case A the pair is one end-effector: the longer geodesic distance is kept, the position
+   is the current detection (the paper favours "the natural detection of end-effectors"; the
+   prediction only guides it when needed).
 7. **Memory** (Eqs. 8-9): a track's geodesic distance is
    ``α d(e_t) + (1 - α) d(e^pr_{t+1})`` with ``α = σ^k`` while it lives on predictions, k the
    frames since it was last related; a detection takes its current Eq. 7 value.
@@ -81,6 +83,15 @@ class TrackerResult:
         return np.array([t.position for t in self.tracks], dtype=np.float64).reshape(-1, 3)
 
 
+#: Case B keeps a memorised end-effector against a current candidate (Fig. 7b) for at most
+#: this many times as many consecutive frames as detections ever supported its track; then
+#: the candidate wins. Unbounded, an extreme seen for a few frames (an elbow while a walker's
+#: arm swings) held its place for 20 frames and more and dropped the real candidates beside
+#: it; at 1 a fist resting on the chest between punches, about as long as it was out, gave
+#: way to the elbow (docs/design.md, "Case B memory lasts no longer than twice its evidence").
+CASE_B_HOLD_FACTOR = 2
+
+
 class _Lost(NamedTuple):
     """A confirmed track dropped in update number ``frame``, last predicted at ``position``."""
 
@@ -104,6 +115,7 @@ class _TrackState:
     detected: bool = True
     offset: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     hits: int = 1  # frames in which a current candidate supported the track
+    held: int = 0  # consecutive frames on its prediction (case B or C)
     # From ``position`` (the rounded end's centre, which is tracked) to the part centre
     # published; a prediction keeps the last detection's (Candidate.centre_shift).
     centre_shift: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
@@ -381,8 +393,10 @@ class Tracker:
             elif case == 'B':
                 cand = cands[j]
                 used_cands.add(j)
-                if cand.geodesic_approx >= pred_geo:
-                    # The current candidate wins (Fig. 7c): the track follows it.
+                if (cand.geodesic_approx >= pred_geo
+                        or track.held >= CASE_B_HOLD_FACTOR * track.hits):
+                    # The current candidate wins (Fig. 7c): the track follows it. So it does
+                    # once the memory has outlasted its evidence (CASE_B_HOLD_FACTOR).
                     self._take_detection(track, cand, cand_entity[j], related=False)
                 else:
                     # The memorised end-effector wins (Fig. 7b); the candidate is dropped.
@@ -480,6 +494,7 @@ class Tracker:
         track.path = cand.path
         track.not_related = 0 if related else track.not_related + 1
         track.missed = 0
+        track.held = 0
         track.age += 1
         track.hits += 1
         track.detected = True
@@ -492,6 +507,7 @@ class Tracker:
         track.entity = pr.entity
         track.not_related += 1
         track.missed = track.missed + 1 if missed else 0
+        track.held += 1
         track.age += 1
         track.detected = False
 
@@ -502,6 +518,7 @@ class Tracker:
         track.position = cand.end_centre
         track.centre_shift = cand.centre_shift
         track.path = cand.path
+        track.held = 0
         track.hits += 1
         track.detected = True
 
