@@ -211,8 +211,9 @@ def test_a_hand_is_reported_at_its_centre_and_a_head_at_its_rounded_end(yaw):
     est, shot = estimated('person', 't_pose', yaw)
     cands = [c for e in est.entities for c in e.candidates]
     positions = np.array([c.position for c in cands])
-    for k in (HEAD, LEFT_HAND, RIGHT_HAND):
-        c = cands[int(np.argmin(np.linalg.norm(positions - shot.gt[k], axis=1)))]
+    nearest = {k: cands[int(np.argmin(np.linalg.norm(positions - shot.gt[k], axis=1)))]
+               for k in (HEAD, LEFT_HAND, RIGHT_HAND)}
+    for k, c in nearest.items():
         shift = np.linalg.norm(c.centre_shift)
         assert shift <= EndeffParams().max_part_radius + 1e-9
         np.testing.assert_allclose(c.end_centre + c.centre_shift, c.position)
@@ -221,8 +222,7 @@ def test_a_hand_is_reported_at_its_centre_and_a_head_at_its_rounded_end(yaw):
                 <= np.linalg.norm(c.end_centre - shot.gt[k]) + 1e-3)
         if k == HEAD:
             assert shift < 0.015, shift
-    hands = [cands[int(np.argmin(np.linalg.norm(positions - shot.gt[k], axis=1)))]
-             for k in (LEFT_HAND, RIGHT_HAND)]
+    hands = [nearest[LEFT_HAND], nearest[RIGHT_HAND]]
     assert max(np.linalg.norm(c.centre_shift) for c in hands) > 0.02  # a hand is shifted
     if yaw == 0.0:  # both hands seen along their length: within 2 cm of their centres
         errors = tip_errors(shot.gt[[LEFT_HAND, RIGHT_HAND]],

@@ -365,8 +365,8 @@ def _tip_positions(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp
                               0.02)
     end = centre + (extreme + radius)[:, None] * axis + radius[:, None] * ray
     shift = (np.clip(-extreme, radius, 2.0 * radius) - radius)[:, None] * axis
-    usable = usable[:, None]
-    return np.where(usable, end + shift, centre), np.where(usable, shift, 0.0)
+    return (np.where(usable[:, None], end + shift, centre),
+            np.where(usable[:, None], shift, 0.0))
 
 
 class _StageTimer:

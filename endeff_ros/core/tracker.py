@@ -481,8 +481,7 @@ class Tracker:
     @staticmethod
     def _take_detection(track: _TrackState, cand: Candidate, entity: int, *,
                         related: bool) -> None:
-        track.position = cand.end_centre
-        track.centre_shift = cand.centre_shift
+        Tracker._reacquire(track, cand)
         if related:
             # Case A: the pair is one end-effector and the longer geodesic distance is
             # selected; with α = σ^0 = 1 the memorised one survives (Eq. 8), which keeps a
@@ -491,13 +490,9 @@ class Tracker:
         else:
             track.geodesic = cand.geodesic_approx  # Eq. 8, second case
         track.entity = entity
-        track.path = cand.path
         track.not_related = 0 if related else track.not_related + 1
         track.missed = 0
-        track.held = 0
         track.age += 1
-        track.hits += 1
-        track.detected = True
 
     @staticmethod
     def _take_prediction(track: _TrackState, pr: _Prediction, geodesic: float, *,
@@ -514,7 +509,8 @@ class Tracker:
     @staticmethod
     def _reacquire(track: _TrackState, cand: Candidate) -> None:
         """A case-B track whose memory won keeps it, but takes the position of a candidate
-        lying where it was predicted."""
+        lying where it was predicted. Also the part of every detection that
+        :meth:`_take_detection` shares: position, part-centre shift, path, support."""
         track.position = cand.end_centre
         track.centre_shift = cand.centre_shift
         track.path = cand.path
