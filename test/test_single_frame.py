@@ -48,7 +48,10 @@ from endeff_ros.synth.body import (
     PersonModel,
     PersonStyle,
 )
+from endeff_ros.synth.proc_clips import walk_clip
 from endeff_ros.synth.render import Camera
+from endeff_ros.synth.skeleton_body import BodyStyle, build_body
+from endeff_ros.synth.views import View, aim_camera, place
 
 #: m, ground truth to its matched candidate. The terminal parts of the person, the star and
 #: the chair legs reach at most 0.12 m (a shoe's half length) from their centre, and the found
@@ -65,6 +68,12 @@ CHAIR_TOLERANCE = 0.08
 #: robot_arm error is 8.5 cm, docs/results.md). This is the benchmark's true-positive
 #: threshold (docs/benchmark-bags.md); that the end lies ON the part is checked separately.
 ARM_TOLERANCE = 0.15
+#: m, the pedestal's end: its square base has two bottom corners, 0.08-0.21 m from the bottom
+#: centre that labels it (the floor hides the rest). In the first arm scene the corner found
+#: second protrudes 0.27 m for a tip 0.22 m wide, no end by ``min_end_aspect`` (a broad
+#: corner), so the one reported is the corner found first, 0.21 m away; that it lies on
+#: the pedestal is checked separately (ON_GRIPPER).
+PEDESTAL_TOLERANCE = 0.22
 #: m, a found end to the solid of its ground truth's terminal part (0 inside): the part-radius
 #: step puts it inside; 2 cm allows for the sub-band centroid on a thin part's surface.
 ON_PART = 0.02
@@ -151,7 +160,8 @@ def scored(kind):
     """The ground-truth ids a scene test scores (the chair's backrest corners are no ends:
     test_chair_backrest_corners) and their tolerance."""
     return (CHAIR_LEGS if kind == 'chair' else slice(None),
-            {'arm': ARM_TOLERANCE, 'chair': CHAIR_TOLERANCE}.get(kind, TIP_TOLERANCE))
+            {'arm': np.array([PEDESTAL_TOLERANCE, ARM_TOLERANCE]),
+             'chair': CHAIR_TOLERANCE}.get(kind, TIP_TOLERANCE))
 
 
 CASES = [
@@ -200,6 +210,35 @@ def test_every_end_effector_found_on_its_part(kind, arg, variant):
     assert np.all(errors < tolerance), f'errors {np.round(errors, 3)}'
     limit = ON_GRIPPER if kind == 'arm' else ON_PART
     assert np.all(on_part <= limit), f'distance to the part {np.round(on_part, 3)}'
+
+
+@functools.cache
+def coat_walker(index):
+    """Frame ``index`` of the procedural walk, worn by a person in a coat (the mocap suite's
+    body), seen from the front at 3 m."""
+    view = View('front', 3.0, 1.3)
+    joints, _ = place(walk_clip(60).positions[index:index + 1], view)
+    return scenes.shoot(build_body(joints[0], BodyStyle(clothing='coat')),
+                        aim_camera(joints, view, KINECT_640))
+
+
+@pytest.mark.parametrize('index', [5, 25, 45])
+def test_a_coat_corner_is_no_end(index):
+    """A coat's lower corner is an extreme of the graph, 0.3-0.45 m from every end-effector,
+    but it protrudes less than 1.5 times its own width (``min_end_aspect``): no end. The true
+    ends found without the rule are all still found with it."""
+    shot = coat_walker(index)
+
+    def far_from_labels(positions):
+        return np.array([np.linalg.norm(shot.gt - p, axis=1).min() > 0.25 for p in positions],
+                        dtype=bool).reshape(-1)
+
+    without = estimate_frame(shot.frame, EndeffParams(min_end_aspect=0.0)).positions()
+    assert far_from_labels(without).any()  # the premise: the corner is there
+    found = estimate_frame(shot.frame, EndeffParams()).positions()
+    assert not far_from_labels(found).any(), np.round(found, 3)
+    true = without[~far_from_labels(without)]
+    assert set_distance(found, true) < 1e-9
 
 
 @pytest.mark.parametrize('yaw', [0.0, 0.35])
@@ -251,10 +290,10 @@ def test_end_effector_check_fails_on_a_wrong_scene(kind, arg, variant):
 
 
 @pytest.mark.parametrize('kind, arg, variant', [
-    *(case for case in CASES if case.values[0] != 'arm'),
-    *(pytest.param(*case.values, id=case.id, marks=pytest.mark.xfail(strict=True, reason=(
-        'the box pedestal (0.24 m square) gives two ends on its bottom edges, 0.13-0.25 m '
-        'apart: one end too many'))) for case in CASES if case.values[0] == 'arm')])
+    *(case for case in CASES if case.id != 'robot_arm-q1'),
+    pytest.param('arm', None, 1, id='robot_arm-q1', marks=pytest.mark.xfail(strict=True, reason=(
+        "the box pedestal's second bottom corner protrudes 0.295 m for a tip 0.195 m wide "
+        '(1.51), just above min_end_aspect: one end too many')))])
 def test_nothing_else_is_reported(kind, arg, variant):
     """One entity and no extra candidate: at most one per end-effector (a missed one is the
     business of test_every_end_effector_found_on_its_part; the chair's backrest gives at

@@ -128,6 +128,11 @@ class EndeffParams:
     max_part_radius: float = _p(0.1, 'Cap on the terminal-part radius used to move the '
                                 'end-effector from the visible surface to the part centre; '
                                 '0 reports the surface.', unit='m', lo=0.0, hi=0.5)
+    min_end_aspect: float = _p(1.5, 'An end protrudes from the found paths at least this '
+                               'many times the width of its terminal part (tip_depth deep, '
+                               'across its axis); a shorter, broader extreme is the corner of '
+                               'a broad surface (a shoulder in a coat, a hip, a box) and is '
+                               'dropped; 0 = off.', lo=0.0, hi=20.0)
 
     # --- Section 5: predict-update tracking ------------------------------------------------------
     flow_method: str = _p('dis', "Dense optical flow for the predict phase: 'dis' or "

@@ -164,10 +164,13 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
                                                        chain_min_points=params.subband_min_points,
                                                        max_count=params.max_end_effectors)]
     dist_root = [graph.dist[subband[seeds[e]], path] for e, _, path, _ in found]
-    positions, shifts = _tip_positions(points, subband, graph, [f[2] for f in found],
-                                       dist_root, params)
+    positions, shifts, widths = _tip_positions(points, subband, graph, [f[2] for f in found],
+                                               dist_root, params)
     candidates: list[list[Candidate]] = [[] for _ in seeds]
-    for (e, node, path, protrusion), position, shift in zip(found, positions, shifts):
+    for (e, node, path, protrusion), position, shift, width in zip(found, positions, shifts,
+                                                                   widths):
+        if _broad_corner(protrusion, width, params):
+            continue
         root = points[seeds[e]]
         candidates[e].append(Candidate(
             position=position, node=node, geodesic=geodesic(graph, path),
@@ -297,6 +300,7 @@ def _tip_positions(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp
                    graph: TopologyGraph, paths: list[npt.NDArray[np.intp]],
                    dist_root: list[npt.NDArray[np.float64]],
                    params: EndeffParams) -> tuple[npt.NDArray[np.float64],
+                                                  npt.NDArray[np.float64],
                                                   npt.NDArray[np.float64]]:
     """End-effector positions: the centre of each terminal part, not its outermost sliver.
 
@@ -315,18 +319,21 @@ def _tip_positions(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp
     reported centre lies at the tip region's centroid along the axis, but between one radius
     (a round end) and one diameter (a part twice as long as wide: a hand, a shoe, a gripper)
     inside the extreme; the diameter bounds it where the tip region runs on into the next
-    link or the radius is overestimated. Returns the centres (M, 3) and, for each, the shift
+    link or the radius is overestimated. Returns the centres (M, 3); for each, the shift
     along the axis from its rounded end's centre (M, 3), which the tracker follows: a
     stable point that does not move with the length of part that happens to be visible
-    (docs/design.md: what the centre model buys). Set ``max_part_radius`` to 0 to report the
+    (docs/design.md: what the centre model buys); and the part's visible width across its
+    axis (M,), uncapped (NaN where it has no axis), for :func:`_broad_corner`. Set
+    ``max_part_radius`` to 0 to report the
     surface centroid. All end-effectors of the frame at once: per-point arrays labelled by
     end-effector, bincounts and one sort per quantile (one pass per end-effector cost ~0.2 ms
     each).
     """
     m = len(paths)
     no_shift = np.zeros((m, 3))
+    no_width = np.full(m, np.nan)
     if m == 0:
-        return no_shift, no_shift
+        return no_shift, no_shift, no_width
     near = [path[d >= d[0] - params.tip_depth] for path, d in zip(paths, dist_root)]
     inner = np.array([path[min(len(path) - 1, len(n))] for path, n in zip(paths, near)])
     # Points of each terminal part, labelled by end-effector (parts may share nodes).
@@ -341,20 +348,21 @@ def _tip_positions(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp
     starts = np.r_[0, np.cumsum(counts)[:-1]]
     centre = np.stack([np.bincount(owner, weights=tip[:, a], minlength=m) for a in range(3)],
                       axis=1) / np.maximum(counts, 1)[:, None]
-    if params.max_part_radius <= 0:
-        return centre, no_shift
     ray = centre / np.linalg.norm(centre, axis=1, keepdims=True)
     inward = graph.centroids[inner] - centre
     across = np.cross(inward, ray)
     norm = np.linalg.norm(across, axis=1)
     usable = (norm >= 1e-9) & (counts >= 3)
     if not usable.any():
-        return centre, no_shift
+        return centre, no_shift, no_width
     rel = tip - centre[owner]
     x = np.einsum('ij,ij->i', rel, across[owner] / np.maximum(norm, 1e-9)[owner, None])
     safe = np.maximum(counts, 1)
     p10 = _group_quantile(x, owner, starts, safe, 0.1)
     p90 = _group_quantile(x, owner, starts, safe, 0.9)
+    width = np.where(usable, p90 - p10, np.nan)
+    if params.max_part_radius <= 0:
+        return centre, no_shift, width
     radius = np.minimum((p90 - p10) / 1.6, params.max_part_radius)
     # Along the axis, a rounded end's centre lies one radius inside its extreme: a head's
     # tip region is only its top cap, whose centroid sits above the head's centre; a long
@@ -366,7 +374,24 @@ def _tip_positions(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp
     end = centre + (extreme + radius)[:, None] * axis + radius[:, None] * ray
     shift = (np.clip(-extreme, radius, 2.0 * radius) - radius)[:, None] * axis
     return (np.where(usable[:, None], end + shift, centre),
-            np.where(usable[:, None], shift, 0.0))
+            np.where(usable[:, None], shift, 0.0), width)
+
+
+def _broad_corner(protrusion: float, width: float, params: EndeffParams) -> bool:
+    """Whether an extreme is the corner of a broad surface rather than the free end of a
+    chain: it protrudes from the found paths less than ``min_end_aspect`` times the width of
+    its terminal part (``tip_depth`` deep, across its axis).
+
+    An end-effector ends a chain that is long for its width: a hand, a foot, a head, a chair's
+    leg or a gripper protrudes several times its own width from the rest of the entity. The
+    extremes that the iterated Dijkstra finds on a shoulder in a coat, a hip, the corner of a
+    box or of a bulky body are short and as broad as the surface they bulge from. A ratio,
+    not a width, so a near or a far, a small or a large entity is judged alike. The
+    stubbiest true ends are heads between raised arms or beside a fist (about 0.24 m over
+    0.15 m, 1.6); the choice of the ratio and its evidence are in docs/design.md. NaN widths
+    (no axis) are kept.
+    """
+    return params.min_end_aspect > 0 and bool(protrusion < params.min_end_aspect * width)
 
 
 class _StageTimer:
