@@ -324,10 +324,9 @@ def _tip_positions(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp
     stable point that does not move with the length of part that happens to be visible
     (docs/design.md: what the centre model buys); and the part's visible width across its
     axis (M,), uncapped (NaN where it has no axis), for :func:`_broad_corner`. Set
-    ``max_part_radius`` to 0 to report the
-    surface centroid. All end-effectors of the frame at once: per-point arrays labelled by
-    end-effector, bincounts and one sort per quantile (one pass per end-effector cost ~0.2 ms
-    each).
+    ``max_part_radius`` to 0 to report the surface centroid. All end-effectors of the frame
+    at once: per-point arrays labelled by end-effector, bincounts and one sort per quantile
+    (one pass per end-effector cost ~0.2 ms each).
     """
     m = len(paths)
     no_shift = np.zeros((m, 3))
