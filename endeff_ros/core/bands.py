@@ -8,11 +8,13 @@ one sparse radius graph, so an iteration is a few vectorised operations over the
 neighbours; Python loops run once per band, never per point.
 
 Sub-bands (the paper leaves the split open): a band is cut into its connected pieces, with
-connectivity at the attachment distance λ, so two legs or an arm beside the torso at the same
-level become different sub-bands; a piece with more than ``subband_max_points`` points is cut
-further into equal slices along its main axis, so a wide torso band does not collapse into one
-node whose centroid lies far from where the limbs attach. Connectivity matches the paper's
-"context" of a sub-band; the size cap is the paper's own criterion.
+connectivity at the band distance δ_L (the caller's ``connect``), so two legs or an arm beside
+the torso at the same level become different sub-bands (cutting at λ instead, 0.06 against 0.08
+m, found more hands and more false ends on the mocap dev split: docs/results.md); a piece with
+more than ``subband_max_points`` points is cut further into equal slices along its main axis,
+so a wide torso band does not collapse into one node whose centroid lies far from where the
+limbs attach. Connectivity matches the paper's "context" of a sub-band; the size cap is the
+paper's own criterion.
 """
 
 from __future__ import annotations
