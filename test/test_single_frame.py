@@ -235,7 +235,7 @@ def test_a_bulge_of_a_coat_is_no_end(index):
                         dtype=bool).reshape(-1)
 
     without = estimate_frame(shot.frame, EndeffParams(min_end_aspect=0.0)).positions()
-    assert far_from_labels(without).any()  # the premise: the corner is there
+    assert far_from_labels(without).any()  # the premise: the bulge is there
     found = estimate_frame(shot.frame, EndeffParams()).positions()
     assert not far_from_labels(found).any(), np.round(found, 3)
     true = without[~far_from_labels(without)]
