@@ -378,6 +378,29 @@ def test_pan_the_depth_barely_shows_relearns_once_the_colour_settles():
     assert points == 0
 
 
+def test_a_pan_that_ends_with_a_small_step_leaves_no_furniture_edges():
+    """The camera turns by 12 degrees in three frames and brakes with a last step of 1
+    degree: too few depths change for the depth to call that a camera motion, but the
+    colour, compared with the frame that re-learnt just before it, sees the whole room
+    shift, so the background is learnt again from the view after the camera stopped, and no
+    edge of the chair stays foreground (they did when the re-learning frame's grey image was
+    dropped with the earlier views')."""
+    model = BackgroundModel()
+    static = room().copy()
+    add_chair(static)
+    none = np.zeros(static.shape, bool)
+    for k, deg in enumerate([0.0] * 30 + [4.0, 8.0, 12.0] + [13.0] * 21):
+        yaw = np.radians(deg)
+        depth = _turned(static, yaw) if deg else static
+        f = _colour_frame(k, depth, none, room_shift=int(round(K.fx * np.tan(yaw))))
+        est = estimate_frame(f, PARAMS, background=model)
+        model.observe_color(f.color, f.stamp_ns)
+        if k == 32:
+            relearnt = model.relearns
+    assert relearnt >= 1 and model.relearns == relearnt + 1  # the last step re-learnt
+    assert not model.learning and est.points.shape[0] == 0
+
+
 def test_strided_grey_of_colour_and_mono():
     color = np.zeros((4, 6, 3), np.uint8)
     color[:2, :2] = 200

@@ -107,14 +107,19 @@ background model removes what never moved, with the person present from the firs
   of that fraction re-learns again during the learning time that follows (the turn's last
   degree would otherwise leave every edge of the furniture "changed"). The tracks that sat
   on a moving component for ``CARRY_AFTER_S`` when the turn began keep their components
-  foreground through it (:meth:`BackgroundModel.protect`): a person standing still while the
-  camera turns has no changed pixel when learning ends. The colour helps twice. When its
-  last evidence said the whole scene changed (floor and walls stirred: a pan, or the light),
-  a third of the fraction is enough: a turn over a floor and far walls changes few depths
-  (turning about the vertical axis keeps a level floor's depth along each image row), and a
-  change of light moves no depth at all. And while learning after a turn, a frame whose
+  foreground through it, in the frames they are detected in
+  (:meth:`BackgroundModel.protect`): a person standing still while the camera turns has no
+  changed pixel when learning ends, and a predicted track's anchor may lie on the wall
+  behind the hand it lost. The colour helps twice. When its last evidence said the whole
+  scene changed (floor and walls stirred: a pan, or the light), a third of the fraction is
+  enough: a turn over a floor and far walls changes few depths (turning about the vertical
+  axis keeps a level floor's depth along each image row), and a change of light moves no
+  depth at all. And while learning after a turn, a frame whose
   colour still says the scene moves re-learns again, so the background is the view after
   the camera stopped, not one taken mid-turn, whose furniture edges would stay "changed".
+  That colour is compared with the frame that re-learnt last (its grey image is kept when
+  the older ones are dropped): a braking camera's last step, too small for the depth, is
+  seen only so.
 
 Everything is vectorised on the strided image the cloud is built from (320x240 by default):
 a few dozen array operations and one ``cv2.connectedComponents``. Time comes from the frame
@@ -412,7 +417,11 @@ class BackgroundModel:
         self._out = np.zeros(shape, bool)
         self._learn_until = t + params.background_learn_s
         self._settling = False
-        self._greys = []
+        # The grey images of earlier views say nothing of this one, but this frame's own (taken
+        # when a camera motion re-learns) is the next frame's reference: a pan's last, small
+        # step would otherwise never be seen by the colour, and the background would keep the
+        # view one step before the camera stopped (every furniture edge "changed").
+        self._greys = [g for g in self._greys if g[0] >= t]
         self._evidence = None
 
     def _remember(self, stamp_ns: int, depth: npt.NDArray[np.float32],
@@ -686,7 +695,8 @@ class BackgroundModel:
                          for row in windows], dtype=np.int32)  # a loop over tracks only
 
     def protect(self, positions: npt.NDArray[np.float64], ids: list[int],
-                intrinsics: Intrinsics, stride: int) -> None:
+                intrinsics: Intrinsics, stride: int,
+                detected: npt.ArrayLike | None = None) -> None:
         """Tell the model where the tracks are: ``positions`` (N, 3) metres, optical frame,
         the surface anchors of the tracks with ``ids`` after the last frame. Their
         components restart the absorption clock (a tracked person standing still is not
@@ -695,7 +705,12 @@ class BackgroundModel:
         while the camera turns is not dropped when the learning after the turn ends, while
         tracks started on furniture during that learning do not count (only a camera motion
         carries tracks: otherwise a track that once sat on a moving chair would keep it
-        for good). ``stride``: the pixel stride the last frame was labelled at."""
+        for good). A carried track keeps its component only in frames it was detected in
+        (``detected``, aligned with ``ids``; None: all were): a predicted track's anchor is
+        where its end-effector might be, and as the end leaves it (a raised hand leaving the
+        image) the anchor's window falls on the wall behind, which it would keep as an entity
+        for as long as the prediction lives. ``stride``: the pixel stride the last frame was
+        labelled at."""
         labels = self._labels
         if labels is None or self._bg is None:
             return
@@ -707,6 +722,8 @@ class BackgroundModel:
         ok = (pts[:, 2] > 1e-6) & np.isfinite(u) & np.isfinite(v)
         uv = np.stack([u[ok], v[ok]], axis=1).astype(np.int64)
         track_ids = track_ids[ok]
+        seen = (np.ones(len(ok), bool) if detected is None
+                else np.asarray(detected, dtype=bool).reshape(-1))[ok]
         hit = self._track_labels(labels, uv)
         if hit.any():
             self._near_since[np.isin(labels, hit[hit > 0])] = self._t
@@ -721,4 +738,4 @@ class BackgroundModel:
         alive = set(track_ids.tolist())
         self._fg_ids = {i: since for i, since in self._fg_ids.items() if i in alive}
         self._carried &= alive
-        self._carried_uv = uv[np.isin(track_ids, list(self._carried))]
+        self._carried_uv = uv[np.isin(track_ids, list(self._carried)) & seen]

@@ -217,7 +217,8 @@ class Tracker:
         self._prev = frame
         if self.params.background:  # tracked entities are never absorbed by the background
             self.background.protect(self._anchors(), [t.id for t in self._tracks],
-                                    frame.intrinsics, self.params.pixel_stride)
+                                    frame.intrinsics, self.params.pixel_stride,
+                                    detected=[t.detected for t in self._tracks])
         tracks = [self._publish(t) for t in self._tracks]
         return TrackerResult(frame.stamp_ns, frame.frame_id, tracks, estimate, stages)
 
