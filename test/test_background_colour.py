@@ -10,6 +10,7 @@ by a pixel a frame (a motion their depth does not show at all).
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from test_background import (
     CAMERA_HEIGHT,
     CHAIR_X,
@@ -320,14 +321,16 @@ def test_furniture_a_walker_stirred_past_is_background_again_once_they_are_gone(
     assert all(chair == 0 and person > 300 for chair, person in out[66:]), out[66:]
 
 
-def _walk_away(with_colour: bool) -> int:
+def _walk_away(with_colour: bool, lost_every: int = 0) -> int:
     """A person 0.9 m from the camera walks away and to the side (1.2 m/s, 0.9 m/s), covering
-    a fifth of the image at first: the camera motions detected."""
+    a fifth of the image at first: the camera motions detected. ``lost_every``: every so
+    many frames the colour image is lost (0: none)."""
     model = BackgroundModel()
     for k in range(45):
+        lost = lost_every > 0 and k % lost_every == lost_every - 1
         _chair_room_step(model, k, lambda image, k=k: add_person(image, 0.03 * k, 0.3,
                                                                  z=0.9 + 0.04 * k),
-                         with_colour=with_colour)
+                         with_colour=with_colour and not lost)
     return model.relearns
 
 
@@ -336,6 +339,14 @@ def test_person_walking_away_close_to_the_camera_is_no_camera_motion():
     farther); the colour image shows floor and walls still, so the background is kept."""
     assert _walk_away(with_colour=False) >= 1
     assert _walk_away(with_colour=True) == 0
+
+
+@pytest.mark.parametrize('lost_every', [2, 3, 5])
+def test_a_lost_colour_image_does_not_hand_camera_motion_to_the_depth(lost_every):
+    """The same walk with colour images lost now and then (a congested link): in those
+    frames the colour has no word, and the depth would take the walker for a pan; the model
+    waits for the next colour image instead."""
+    assert _walk_away(with_colour=True, lost_every=lost_every) == 0
 
 
 def _pan_with_colour(with_colour: bool, fraction: float = 0.08) -> tuple[BackgroundModel, int]:

@@ -101,8 +101,11 @@ background model removes what never moved, with the person present from the firs
   background changes pixels mostly in one direction (nearer where they are; farther only
   where they stood at the start and for a few frames), a pan changes both at every depth
   edge. A person close to the camera who walks away changes as many pixels both ways, so
-  the depth is asked only in frames without colour evidence: with it, floor and walls stood
-  still in the colour image, and the camera did not move. Tracks are not touched (the
+  with colour in the stream the depth is asked only when the colour said the whole scene
+  changed (below): floor and walls that stood still in the colour image say the camera did
+  not move, and a frame without that word (its colour image lost, or a person close to the
+  camera stirring most of the image) waits for the next colour image. Without colour (none
+  within ``COLOR_LAG_S``) the depth decides alone. Tracks are not touched (the
   tracker keeps its ids). While the camera brakes, a third
   of that fraction re-learns again during the learning time that follows (the turn's last
   degree would otherwise leave every edge of the furniture "changed"). The tracks that sat
@@ -550,7 +553,13 @@ class BackgroundModel:
         # fraction will do, and while learning after a turn such a frame re-learns again
         # (module docstring, "Camera motion").
         settling = self._settling and t < self._learn_until
-        if n_known >= MIN_KNOWN_FRACTION * d.size and stirred is None:
+        # A stream with colour asks the depth only when the colour said the scene moved: a
+        # frame without evidence in it (a colour image lost, most of the image stirring
+        # while floor and walls stood still) waits for the next word of the colour.
+        colour_live = (self._seen_color is not None
+                       and stamp_ns - self._seen_color <= COLOR_LAG_S * 1e9)
+        if (n_known >= MIN_KNOWN_FRACTION * d.size and stirred is None
+                and (settling or scene_moved or not colour_live)):
             recent_far = farther | (self._far_t > t - RECENT_FAR_S)
             f = params.background_camera_motion_fraction * n_known
             if settling or scene_moved:
