@@ -424,3 +424,23 @@ def test_fit_floor_finds_a_floor_that_a_wall_outnumbers():
     _, floor = foreground_cloud(depth, KINECT_640, params)
     assert floor is not None
     assert _angle_deg(floor.normal, [0.0, -1.0, 0.0]) < 2.0
+
+
+def test_a_known_floor_follows_the_floor_it_sees():
+    """The tracker passes each frame the floor of the frame before. A first fit that is off
+    (2 degrees of roll and 3 cm of height: a RANSAC sample biased by furniture) is pulled
+    towards the floor the frames show, through the points near it, instead of being kept for
+    the rest of the stream."""
+    camera = tilted(10.0, 0.0)
+    depth = scenes.shoot(scenes.person('arms_down', x=0.2), camera).frame.depth
+    params = EndeffParams(box_max_z=4.3)
+    truth = up(camera)
+    c, s = math.cos(math.radians(2.0)), math.sin(math.radians(2.0))  # rolled about the view
+    normal = np.array([c * truth[0] - s * truth[1], s * truth[0] + c * truth[1], truth[2]])
+    floor = FloorPlane(normal, camera.height + 0.03)
+    errors = []
+    for _ in range(20):
+        _, floor = foreground_cloud(depth, KINECT_640, params, floor=floor)
+        errors.append((_angle_deg(floor.normal, truth), abs(floor.offset - camera.height)))
+    assert errors[0][0] < 2.0 and errors[0][1] < 0.03  # each frame moves it closer
+    assert errors[-1][0] < 0.2 and errors[-1][1] < 0.005

@@ -638,3 +638,28 @@ def test_warm_up_runs_every_stage_and_leaves_no_state():
         a, b = warmed.update(frame), fresh.update(frame)
         assert [(t.id, t.state) for t in a.tracks] == [(t.id, t.state) for t in b.tracks]
         np.testing.assert_allclose(a.positions(), b.positions())
+
+
+
+def test_the_floor_is_fitted_anew_when_the_camera_moves():
+    """After a camera motion (the background re-learnt) the tracker fits the floor again
+    instead of passing on the plane of the old view (a tilt of the head changes it by more
+    than following the floor can catch up with)."""
+    from endeff_ros.core.cloud import FloorPlane
+    from endeff_ros.synth.scenes import LEVEL, person, shoot
+
+    depth = shoot(person('arms_down', x=0.2), LEVEL).frame.depth
+    tracker = Tracker(_EndeffParams(box_max_z=4.3))
+
+    def step(k: int) -> FrameEstimate:
+        frame = RGBDFrame(k * 33_333_333, 'camera', depth, LEVEL.intrinsics)
+        return tracker.update(frame).estimate
+
+    step(0)
+    stale = FloorPlane(np.array([0.0, -0.9, -np.sqrt(1 - 0.81)]), 1.0)  # 26 degrees off
+    tracker._floor = stale  # as if the floor had been fitted in another view
+    step(1)
+    assert step(2).floor.normal @ stale.normal == pytest.approx(stale.normal @ stale.normal)
+    tracker.background.relearns += 1  # the camera moved
+    step(3)
+    assert step(4).floor.normal @ np.array([0.0, -1.0, 0.0]) > 0.999  # the level floor

@@ -154,6 +154,7 @@ class Tracker:
             self._next_id = 0
         self._prev: RGBDFrame | None = None
         self._floor: FloorPlane | None = None
+        self._relearns = self.background.relearns  # camera motions seen (the floor is refitted)
         self._frame = 0  # updates since the reset
         self._lost: list[_Lost] = []  # confirmed tracks dropped lately
 
@@ -206,6 +207,9 @@ class Tracker:
         if self.params.background:  # colour motion, for the next frame's background
             self.background.observe_color(frame.color, frame.stamp_ns)
         self._floor = estimate.floor
+        if self.background.relearns != self._relearns:  # the camera moved: fit the floor anew
+            self._relearns = self.background.relearns
+            self._floor = None
         stages = dict(estimate.stage_ms)
         t0 = time.perf_counter()
         predicted = self._predict(frame, flow)
