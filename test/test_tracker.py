@@ -663,3 +663,6 @@ def test_the_floor_is_fitted_anew_when_the_camera_moves():
     tracker.background.relearns += 1  # the camera moved
     step(3)
     assert step(4).floor.normal @ np.array([0.0, -1.0, 0.0]) > 0.999  # the level floor
+    tracker._floor = stale
+    tracker.reset_background()  # the ~/reset_background service: the same
+    assert step(5).floor.normal @ np.array([0.0, -1.0, 0.0]) > 0.999

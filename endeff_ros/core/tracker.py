@@ -159,8 +159,10 @@ class Tracker:
         self._lost: list[_Lost] = []  # confirmed tracks dropped lately
 
     def reset_background(self) -> None:
-        """Re-learn the static background from the next frame; the tracks are kept."""
+        """Re-learn the static background and fit the floor anew from the next frame (the
+        camera may have been moved on purpose); the tracks are kept."""
         self.background.reset()
+        self._floor = None
 
     def _flow_estimator(self) -> FlowEstimator:
         if self._flow is None or self._flow.method != self.params.flow_method:
