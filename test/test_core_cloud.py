@@ -444,3 +444,21 @@ def test_a_known_floor_follows_the_floor_it_sees():
         errors.append((_angle_deg(floor.normal, truth), abs(floor.offset - camera.height)))
     assert errors[0][0] < 2.0 and errors[0][1] < 0.03  # each frame moves it closer
     assert errors[-1][0] < 0.2 and errors[-1][1] < 0.005
+
+
+def test_a_floor_to_refit_is_fitted_anew_or_kept_when_none_is_found():
+    """After a camera motion the tracker asks for the floor to be fitted anew
+    (``refit``): where the frame shows one, the fit replaces the old plane; where it shows
+    none (a view of the wall, or a failed fit), the old plane is kept rather than no floor
+    at all, which would leave the whole floor foreground."""
+    camera = tilted(10.0, 0.0)
+    stale = FloorPlane(up(tilted(0.0, 0.0)), camera.height, refit=True)
+    params = EndeffParams(box_max_z=4.3)
+    person = scenes.person('arms_down', x=0.2)
+    _, floor = foreground_cloud(scenes.shoot(person, camera).frame.depth, KINECT_640, params,
+                                floor=stale)
+    assert _angle_deg(floor.normal, up(camera)) < 1.0 and not floor.refit
+    _, kept = foreground_cloud(scenes.shoot(person, camera, floor=False).frame.depth, KINECT_640,
+                               params, floor=stale)
+    assert np.array_equal(kept.normal, stale.normal) and kept.offset == stale.offset
+    assert not kept.refit

@@ -35,10 +35,15 @@ MAX_RANGE_M = 20.0
 
 @dataclass(frozen=True)
 class FloorPlane:
-    """Plane ``normal . x + offset = 0`` with ``normal`` pointing up (towards -y), unit length."""
+    """Plane ``normal . x + offset = 0`` with ``normal`` pointing up (towards -y), unit length.
+
+    ``refit``: a known plane that may no longer hold (the camera moved): :func:`foreground_cloud`
+    fits the floor anew and uses this one only if no floor is found.
+    """
 
     normal: npt.NDArray[np.float64]
     offset: float
+    refit: bool = False
 
     def distance(self, points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Signed height of (N, 3) points above the plane, metres."""
@@ -299,14 +304,18 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
     keep = _in_box(x, y, z, params)
     if params.floor_removal:
         known = floor is not None
-        if floor is None:
+        if floor is None or floor.refit:
             inside = np.flatnonzero(keep)
             inside = inside[::max(1, len(inside) // _FLOOR_SAMPLE)]
-            floor = fit_floor(np.stack([x[inside], y[inside], z[inside]], axis=1),
-                              distance=params.floor_distance,
-                              max_tilt_deg=params.floor_max_tilt_deg,
-                              min_fraction=params.floor_min_fraction,
-                              iterations=params.floor_iterations, sample=_FLOOR_SAMPLE)
+            fitted = fit_floor(np.stack([x[inside], y[inside], z[inside]], axis=1),
+                               distance=params.floor_distance,
+                               max_tilt_deg=params.floor_max_tilt_deg,
+                               min_fraction=params.floor_min_fraction,
+                               iterations=params.floor_iterations, sample=_FLOOR_SAMPLE)
+            if fitted is not None:
+                floor, known = fitted, False
+            elif floor is not None:  # none found: the old plane is better than none
+                floor = FloorPlane(floor.normal, floor.offset)
         if floor is not None:
             height = floor.heights(x, y, z)
             if known:  # the next frame's floor: this one's, following what it shows

@@ -40,7 +40,7 @@ Each track has a stable id, its entity, age, state (detected / predicted) and a 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -162,7 +162,13 @@ class Tracker:
         """Re-learn the static background and fit the floor anew from the next frame (the
         camera may have been moved on purpose); the tracks are kept."""
         self.background.reset()
-        self._floor = None
+        self._refit_floor()
+
+    def _refit_floor(self) -> None:
+        """Fit the floor anew in the next frame, keeping the current plane for the frames in
+        which none is found (a failed fit would leave the whole floor foreground)."""
+        if self._floor is not None:
+            self._floor = replace(self._floor, refit=True)
 
     def _flow_estimator(self) -> FlowEstimator:
         if self._flow is None or self._flow.method != self.params.flow_method:
@@ -211,7 +217,7 @@ class Tracker:
         self._floor = estimate.floor
         if self.background.relearns != self._relearns:  # the camera moved: fit the floor anew
             self._relearns = self.background.relearns
-            self._floor = None
+            self._refit_floor()
         stages = dict(estimate.stage_ms)
         t0 = time.perf_counter()
         predicted = self._predict(frame, flow)
