@@ -25,6 +25,7 @@ import numpy as np
 import pytest
 import scenarios as sc
 
+from endeff_ros.core.cloud import FloorPlane
 from endeff_ros.core.graph import approximate_geodesic
 from endeff_ros.core.params import EndeffParams as _EndeffParams
 from endeff_ros.core.single_frame import FrameEstimate, estimate_frame
@@ -640,15 +641,12 @@ def test_warm_up_runs_every_stage_and_leaves_no_state():
         np.testing.assert_allclose(a.positions(), b.positions())
 
 
-
 def test_the_floor_is_fitted_anew_when_the_camera_moves():
     """After a camera motion (the background re-learnt) the tracker fits the floor again
     instead of passing on the plane of the old view (a tilt of the head changes it by more
     than following the floor can catch up with)."""
-    from endeff_ros.core.cloud import FloorPlane
-    from endeff_ros.synth.scenes import LEVEL, person, shoot
-
-    depth = shoot(person('arms_down', x=0.2), LEVEL).frame.depth
+    LEVEL = sc.scenes.LEVEL
+    depth = sc.scenes.shoot(sc.scenes.person('arms_down', x=0.2), LEVEL).frame.depth
     tracker = Tracker(_EndeffParams(box_max_z=4.3))
 
     def step(k: int) -> FrameEstimate:

@@ -229,10 +229,12 @@ FLOOR_FOLLOW = 0.2
 _FOLLOW_SAMPLE = 4096
 
 
-def follow_floor(floor: FloorPlane, points: npt.NDArray[np.float64], n_inside: int,
+def follow_floor(floor: FloorPlane, cols: Columns, near: npt.NDArray[np.intp], n_inside: int,
                  params: EndeffParams) -> FloorPlane:
-    """The known ``floor`` moved towards the least-squares plane of ``points``, the points of
-    this frame within ``floor_distance`` of it (``n_inside``: the points inside the box).
+    """The known ``floor`` moved towards the least-squares plane of the points ``near`` (indices
+    into the x, y, z columns ``cols``), this frame's points within ``floor_distance`` of it
+    (``n_inside``: the points inside the box). Only a sample of them is gathered (at most
+    ``_FOLLOW_SAMPLE``): the floor is often most of the frame.
 
     The tracker passes each frame the floor of the frame before; fitted once, a plane that
     the first frame's RANSAC sample got wrong stays wrong for the whole stream (furniture in
@@ -243,9 +245,10 @@ def follow_floor(floor: FloorPlane, points: npt.NDArray[np.float64], n_inside: i
     lying on the floor, moves it little. Frames showing too little floor
     (``floor_min_fraction``) or a plane too tilted to be one leave it as it is.
     """
-    if len(points) < max(50, params.floor_min_fraction * n_inside):
+    if len(near) < max(50, params.floor_min_fraction * n_inside):
         return floor
-    normal, offset = _refine_plane(points[::max(1, len(points) // _FOLLOW_SAMPLE)], floor.normal)
+    sample = near[::max(1, len(near) // _FOLLOW_SAMPLE)]
+    normal, offset = _refine_plane(np.stack([c[sample] for c in cols], axis=1), floor.normal)
     if -normal[1] < math.cos(math.radians(params.floor_max_tilt_deg)):
         return floor
     blended = (1 - FLOOR_FOLLOW) * floor.normal + FLOOR_FOLLOW * normal
@@ -320,8 +323,8 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
             height = floor.heights(x, y, z)
             if known:  # the next frame's floor: this one's, following what it shows
                 near = np.flatnonzero(keep & (np.abs(height) < params.floor_distance))
-                floor = follow_floor(floor, np.stack([x[near], y[near], z[near]], axis=1),
-                                     int(np.count_nonzero(keep)), params)
+                floor = follow_floor(floor, (x, y, z), near, int(np.count_nonzero(keep)),
+                                     params)
             keep &= height > params.floor_distance
     if params.wall_min_area > 0:
         keep &= ~wall_points(x, y, z, keep, valid, intrinsics, params)
