@@ -413,6 +413,46 @@ def test_components_split_at_depth_edges():
     assert far.any() and not (far & ~mask).any()
 
 
+def test_a_flying_pixel_between_two_surfaces_does_not_join_them():
+    """A depth sensor reads a mix of both surfaces on a pixel at an occlusion edge: a lamp at
+    2.4 m behind a person at 1.8 m, one column at 2.1 m between them. Each of its steps is
+    below the edge step; the two together are not: the edge is cut there. A surface whose
+    depth grows as steeply but evenly (a grazing side) stays one part."""
+    depth = np.full((12, 12), 2.4, np.float32)
+    depth[:, 7:] = 1.8
+    depth[:, 6] = 2.1
+    labels, far = depth_components(depth, np.ones(depth.shape, bool), 2)
+    assert labels[5, 2] > 0 and labels[5, 9] > 0 and labels[5, 2] != labels[5, 9]
+    assert far[:, 6].all()  # the flying pixels belong to neither
+    ramp = (1.8 + 0.14 * np.arange(12, dtype=np.float32))[None, :].repeat(12, axis=0)
+    labels, far = depth_components(ramp, np.ones(ramp.shape, bool), 2)
+    assert labels.min() > 0 and len(np.unique(labels)) == 1 and not far.any()
+
+
+def test_a_lamp_behind_a_person_joined_by_flying_pixels_stays_background():
+    """A person sways in front of a floor lamp, their raised arm across its shade; along the
+    arm's outline the sensor reads depths between the two (flying pixels), which would make
+    the lamp one component with the moving person for as long as the arm is there."""
+    model = BackgroundModel()
+    lamp = []
+    lamp_z = PERSON_Z + 0.6
+    for k in range(45):
+        depth = room().copy()
+        paint(depth, 0.30, 0.34, 0.0, 1.35, lamp_z)  # pole
+        paint(depth, 0.10, 0.55, 1.30, 1.60, lamp_z)  # shade
+        add_person(depth, -0.35 + 0.05 * np.sin(k / 4.0), 1.0)
+        lamp_mask = np.abs(depth - lamp_z) < 0.01
+        person = np.abs(depth - PERSON_Z) < 0.01
+        near_person = cv2.dilate(person.view(np.uint8), np.ones((5, 5), np.uint8)).view(bool)
+        depth[near_person & lamp_mask] = (PERSON_Z + lamp_z) / 2
+        est = estimate_frame(frame(k, depth), PARAMS, background=model)
+        lamp.append(int(np.count_nonzero((est.points[:, 0] > 0.25)
+                                         & (np.abs(est.points[:, 2] - lamp_z) < 0.1))))
+    assert not model.learning
+    assert lamp[3] > 50  # while learning the lamp is kept (it stirs with the person)
+    assert max(lamp[-20:]) == 0
+
+
 @pytest.mark.parametrize('bad', [np.nan, 0.0, np.inf])
 def test_no_reading_is_never_background_or_foreground(bad):
     model = BackgroundModel()

@@ -17,7 +17,8 @@ background model removes what never moved, with the person present from the firs
   3x3 opening, which removes the 1-pixel lines that flying pixels leave along static edges.
 - **Foreground: the whole connected part that changed.** Pixels inside the box and off the
   floor are labelled into connected components (4-connected, cut where neighbouring depths
-  jump by more than ``(EDGE_STEP + EDGE_STEP_Z z) * stride``: see :func:`depth_components`).
+  jump by more than ``(EDGE_STEP + EDGE_STEP_Z z) * stride``: see :func:`depth_components`,
+  and at the flying pixels a sensor reads between two surfaces: :func:`flying_pixels`).
   A component is foreground when enough of its pixels changed (``MIN_CHANGED_FRACTION`` of
   it, at least ``MIN_CHANGED_PX`` full-resolution pixels), or while most of it was part of
   such a component within ``HOLD_S`` at the same depth (a person whose motion pauses for a
@@ -164,6 +165,9 @@ HOLD_S = 0.5
 #: less; a person 10 cm in front of a chair by more).
 EDGE_STEP = 0.1
 EDGE_STEP_Z = 0.03
+#: A pixel between 4-neighbours that differ by more than the edge step, at least this fraction
+#: of the step from each, is a flying pixel (:func:`flying_pixels`).
+FLYING_FRACTION = 0.25
 #: Farther readings adopted within this time count towards camera motion.
 RECENT_FAR_S = 0.25
 #: Camera motion is only judged when this fraction of the image has a known background.
@@ -236,10 +240,10 @@ def depth_components(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_]
     ``depth`` (H, W) metres with 0 or NaN where there is no reading, ``mask`` (H, W) the
     pixels to label, ``stride`` the pixel stride of the image (neighbours are that many
     full-resolution pixels apart). A pixel whose 4-neighbour is nearer by more than the edge
-    step is the far side of an edge and is left out; 4-connectivity then cannot cross the
-    edge. ``far_side``: :func:`far_side_pixels` of the same image, when the caller labels
-    several masks of it. Returns the labels (0: none) and the left-out far-side pixels of
-    ``mask``.
+    step is the far side of an edge and is left out, and so is a flying pixel on an edge;
+    4-connectivity then cannot cross the edge. ``far_side``: :func:`far_side_pixels` of the
+    same image, when the caller labels several masks of it. Returns the labels (0: none)
+    and the left-out far-side pixels of ``mask``.
     """
     if far_side is None:
         far_side = far_side_pixels(depth, stride)
@@ -251,16 +255,46 @@ def depth_components(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_]
 
 def far_side_pixels(depth: npt.NDArray[np.float32], stride: int) -> npt.NDArray[np.bool_]:
     """(H, W) pixels of ``depth`` with a 4-neighbour nearer by more than the edge step
-    (``(EDGE_STEP + EDGE_STEP_Z * z) * stride`` metres): the far sides of depth edges."""
+    (``(EDGE_STEP + EDGE_STEP_Z * z) * stride`` metres): the far sides of depth edges, and
+    the :func:`flying_pixels` on them."""
     z = np.where(np.isfinite(depth) & (depth > 0), depth, np.inf).astype(np.float32)
-    step = np.float32((EDGE_STEP + EDGE_STEP_Z * np.minimum(z, 20.0)) * stride)
+    step = _edge_step(z, stride)
     lower = z - step  # a neighbour below this is nearer by more than the step
     far = np.zeros(z.shape, dtype=bool)
     far[:, :-1] |= z[:, 1:] < lower[:, :-1]
     far[:, 1:] |= z[:, :-1] < lower[:, 1:]
     far[:-1, :] |= z[1:, :] < lower[:-1, :]
     far[1:, :] |= z[:-1, :] < lower[1:, :]
-    return far
+    return far | flying_pixels(depth, stride)
+
+
+def _edge_step(z: npt.NDArray[np.float32], stride: int) -> npt.NDArray[np.float32]:
+    """The depth edge step at depths ``z`` (inf: none), metres."""
+    return np.float32((EDGE_STEP + EDGE_STEP_Z * np.minimum(z, 20.0)) * stride)
+
+
+def flying_pixels(depth: npt.NDArray[np.float32], stride: int) -> npt.NDArray[np.bool_]:
+    """(H, W) pixels of ``depth`` that read a mix of two surfaces at an occlusion edge.
+
+    Time-of-flight and structured-light sensors give a pixel on an occlusion edge a depth
+    between the near and the far surface. Each of its two steps may be below the edge step
+    while the two together are not, so one such pixel joins a person's arm to the lamp 0.6 m
+    behind it (docs/design.md, "Flying pixels"). A pixel is flying when its 4-neighbours
+    differ by more than the edge step and it lies at least ``FLYING_FRACTION`` of the step
+    from both the nearest and the farthest of them. A surface whose depth grows evenly
+    across the pixel is one only when it grows by half the step per pixel: at 2 m and the
+    default stride, a surface seen within 3 degrees of grazing.
+    """
+    valid = np.isfinite(depth) & (depth > 0)
+    z = np.where(valid, depth, np.inf).astype(np.float32)
+    cross = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], np.uint8)
+    lo = cv2.erode(z, cross, borderType=cv2.BORDER_CONSTANT, borderValue=np.inf)
+    hi = cv2.dilate(np.where(valid, z, 0).astype(np.float32), cross,
+                    borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    step = _edge_step(z, stride)
+    side = np.float32(FLYING_FRACTION) * step
+    with np.errstate(invalid='ignore'):
+        return valid & (hi - lo > step) & (z - lo > side) & (hi - z > side)
 
 
 def bridge_dropouts(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_],
