@@ -257,7 +257,7 @@ def far_side_pixels(depth: npt.NDArray[np.float32], stride: int) -> npt.NDArray[
     """(H, W) pixels of ``depth`` with a 4-neighbour nearer by more than the edge step
     (``(EDGE_STEP + EDGE_STEP_Z * z) * stride`` metres): the far sides of depth edges, and
     the :func:`flying_pixels` on them."""
-    z = np.where(np.isfinite(depth) & (depth > 0), depth, np.inf).astype(np.float32)
+    z = _readings(depth)
     step = _edge_step(z, stride)
     lower = z - step  # a neighbour below this is nearer by more than the step
     far = np.zeros(z.shape, dtype=bool)
@@ -265,7 +265,12 @@ def far_side_pixels(depth: npt.NDArray[np.float32], stride: int) -> npt.NDArray[
     far[:, 1:] |= z[:, :-1] < lower[:, 1:]
     far[:-1, :] |= z[1:, :] < lower[:-1, :]
     far[1:, :] |= z[:-1, :] < lower[1:, :]
-    return far | flying_pixels(depth, stride)
+    return far | _flying(z, step)
+
+
+def _readings(depth: npt.NDArray[np.floating]) -> npt.NDArray[np.float32]:
+    """``depth`` as float32 with inf where there is no reading (0, NaN, inf)."""
+    return np.where(np.isfinite(depth) & (depth > 0), depth, np.inf).astype(np.float32)
 
 
 def _edge_step(z: npt.NDArray[np.float32], stride: int) -> npt.NDArray[np.float32]:
@@ -279,22 +284,27 @@ def flying_pixels(depth: npt.NDArray[np.float32], stride: int) -> npt.NDArray[np
     Time-of-flight and structured-light sensors give a pixel on an occlusion edge a depth
     between the near and the far surface. Each of its two steps may be below the edge step
     while the two together are not, so one such pixel joins a person's arm to the lamp 0.6 m
-    behind it (docs/design.md, "Flying pixels"). A pixel is flying when its 4-neighbours
+    behind it (docs/design.md, "Flying pixels cut"). A pixel is flying when its 4-neighbours
     differ by more than the edge step and it lies at least ``FLYING_FRACTION`` of the step
     from both the nearest and the farthest of them. A surface whose depth grows evenly
     across the pixel is one only when it grows by half the step per pixel: at 2 m and the
     default stride, a surface seen within 3 degrees of grazing.
     """
-    valid = np.isfinite(depth) & (depth > 0)
-    z = np.where(valid, depth, np.inf).astype(np.float32)
-    cross = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], np.uint8)
-    lo = cv2.erode(z, cross, borderType=cv2.BORDER_CONSTANT, borderValue=np.inf)
-    hi = cv2.dilate(np.where(valid, z, 0).astype(np.float32), cross,
+    z = _readings(depth)
+    return _flying(z, _edge_step(z, stride))
+
+
+_CROSS = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], np.uint8)
+
+
+def _flying(z: npt.NDArray[np.float32], step: npt.NDArray[np.float32]) -> npt.NDArray[np.bool_]:
+    """:func:`flying_pixels` of ``z`` (inf: no reading) with its edge step ``step``."""
+    lo = cv2.erode(z, _CROSS, borderType=cv2.BORDER_CONSTANT, borderValue=np.inf)
+    hi = cv2.dilate(np.where(np.isinf(z), np.float32(0), z), _CROSS,
                     borderType=cv2.BORDER_CONSTANT, borderValue=0)
-    step = _edge_step(z, stride)
     side = np.float32(FLYING_FRACTION) * step
     with np.errstate(invalid='ignore'):
-        return valid & (hi - lo > step) & (z - lo > side) & (hi - z > side)
+        return (hi - lo > step) & (z - lo > side) & (hi - z > side)
 
 
 def bridge_dropouts(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_],
