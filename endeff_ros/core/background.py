@@ -18,7 +18,8 @@ background model removes what never moved, with the person present from the firs
 - **Foreground: the whole connected part that changed.** Pixels inside the box and off the
   floor are labelled into connected components (4-connected, cut where neighbouring depths
   jump by more than ``(EDGE_STEP + EDGE_STEP_Z z) * stride``: see :func:`depth_components`,
-  and at the flying pixels a sensor reads between two surfaces: :func:`flying_pixels`).
+  and, while colour comes, at the flying pixels a sensor reads between two surfaces:
+  :func:`flying_pixels`).
   A component is foreground when enough of its pixels changed (``MIN_CHANGED_FRACTION`` of
   it, at least ``MIN_CHANGED_PX`` full-resolution pixels), or while most of it was part of
   such a component within ``HOLD_S`` at the same depth (a person whose motion pauses for a
@@ -253,10 +254,11 @@ def depth_components(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_]
     return labels, far
 
 
-def far_side_pixels(depth: npt.NDArray[np.float32], stride: int) -> npt.NDArray[np.bool_]:
+def far_side_pixels(depth: npt.NDArray[np.float32], stride: int, *,
+                    flying: bool = True) -> npt.NDArray[np.bool_]:
     """(H, W) pixels of ``depth`` with a 4-neighbour nearer by more than the edge step
     (``(EDGE_STEP + EDGE_STEP_Z * z) * stride`` metres): the far sides of depth edges, and
-    the :func:`flying_pixels` on them."""
+    with ``flying`` the :func:`flying_pixels` on them."""
     z = _readings(depth)
     step = _edge_step(z, stride)
     lower = z - step  # a neighbour below this is nearer by more than the step
@@ -265,7 +267,7 @@ def far_side_pixels(depth: npt.NDArray[np.float32], stride: int) -> npt.NDArray[
     far[:, 1:] |= z[:, :-1] < lower[:, 1:]
     far[:-1, :] |= z[1:, :] < lower[:-1, :]
     far[1:, :] |= z[:-1, :] < lower[1:, :]
-    return far | _flying(z, step)
+    return far | _flying(z, step) if flying else far
 
 
 def _readings(depth: npt.NDArray[np.floating]) -> npt.NDArray[np.float32]:
@@ -288,7 +290,10 @@ def flying_pixels(depth: npt.NDArray[np.float32], stride: int) -> npt.NDArray[np
     differ by more than the edge step and it lies at least ``FLYING_FRACTION`` of the step
     from both the nearest and the farthest of them. A surface whose depth grows evenly
     across the pixel is one only when it grows by half the step per pixel: at 2 m and the
-    default stride, a surface seen within 3 degrees of grazing.
+    default stride, a surface seen within 3 degrees of grazing. A fist punched at the camera
+    (its forearm hidden behind it) may hang on its chest by flying pixels alone, so
+    :meth:`BackgroundModel.foreground` cuts them only while colour comes: the still chest
+    then shows its own motion.
     """
     z = _readings(depth)
     return _flying(z, _edge_step(z, stride))
@@ -565,7 +570,8 @@ class BackgroundModel:
             self._remember(stamp_ns, d, valid, candidate, params)
             if color is not None:  # the first grey image (nothing to compare it with yet)
                 self._evidence = self._color_evidence(color, self._last)
-            self._labels, _ = depth_components(d, candidate, stride)
+            self._labels, _ = depth_components(
+                d, candidate, stride, far_side_pixels(d, stride, flying=color is not None))
             return candidate.copy()
         bg = self._bg
         known = valid & (bg > 0)
@@ -618,7 +624,8 @@ class BackgroundModel:
                 self.relearns += 1
                 self._learn(d, valid, t, params)
                 self._settling = True
-                self._labels, _ = depth_components(d, candidate, stride)
+                self._labels, _ = depth_components(
+                    d, candidate, stride, far_side_pixels(d, stride, flying=colour_live))
                 return candidate.copy()
 
         # Farther readings, and readings where nothing was seen yet (no reading is beyond
@@ -652,7 +659,10 @@ class BackgroundModel:
         upper = candidate if low is None else candidate & ~low
         # Labelled across dropouts; the bridging pixels then belong to no component.
         bridged, mask = bridge_dropouts(d, upper)
-        far_side = far_side_pixels(bridged, stride)
+        # Flying pixels are cut only while colour comes: a fist punched at the camera may hang
+        # on its still chest by them alone, and without colour the chest has no evidence of
+        # its own motion (docs/design.md, "Flying pixels cut").
+        far_side = far_side_pixels(bridged, stride, flying=colour_live or color is not None)
         labels, edge = depth_components(bridged, mask, stride, far_side)
         labels[~upper] = 0
         edge &= upper
