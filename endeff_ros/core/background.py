@@ -267,7 +267,7 @@ def far_side_pixels(depth: npt.NDArray[np.float32], stride: int, *,
     far[:, 1:] |= z[:, :-1] < lower[:, 1:]
     far[:-1, :] |= z[1:, :] < lower[:-1, :]
     far[1:, :] |= z[:-1, :] < lower[1:, :]
-    return far | _flying(z, step) if flying else far
+    return (far | _flying(z, step)) if flying else far
 
 
 def _readings(depth: npt.NDArray[np.floating]) -> npt.NDArray[np.float32]:
