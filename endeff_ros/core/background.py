@@ -267,7 +267,7 @@ def far_side_pixels(depth: npt.NDArray[np.float32], stride: int, *,
     far[:, 1:] |= z[:, :-1] < lower[:, 1:]
     far[:-1, :] |= z[1:, :] < lower[:-1, :]
     far[1:, :] |= z[:-1, :] < lower[1:, :]
-    return (far | _flying(z, step)) if flying else far
+    return (far | flying_pixels(z, step)) if flying else far
 
 
 def _readings(depth: npt.NDArray[np.floating]) -> npt.NDArray[np.float32]:
@@ -280,8 +280,13 @@ def _edge_step(z: npt.NDArray[np.float32], stride: int) -> npt.NDArray[np.float3
     return np.float32((EDGE_STEP + EDGE_STEP_Z * np.minimum(z, 20.0)) * stride)
 
 
-def flying_pixels(depth: npt.NDArray[np.float32], stride: int) -> npt.NDArray[np.bool_]:
-    """(H, W) pixels of ``depth`` that read a mix of two surfaces at an occlusion edge.
+_CROSS = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], np.uint8)
+
+
+def flying_pixels(z: npt.NDArray[np.float32],
+                  step: npt.NDArray[np.float32]) -> npt.NDArray[np.bool_]:
+    """(H, W) pixels of the readings ``z`` (float32 metres, inf: no reading) that read a mix
+    of two surfaces at an occlusion edge; ``step`` (H, W) the edge step at each.
 
     Time-of-flight and structured-light sensors give a pixel on an occlusion edge a depth
     between the near and the far surface. Each of its two steps may be below the edge step
@@ -295,15 +300,6 @@ def flying_pixels(depth: npt.NDArray[np.float32], stride: int) -> npt.NDArray[np
     :meth:`BackgroundModel.foreground` cuts them only while colour comes: the still chest
     then shows its own motion.
     """
-    z = _readings(depth)
-    return _flying(z, _edge_step(z, stride))
-
-
-_CROSS = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], np.uint8)
-
-
-def _flying(z: npt.NDArray[np.float32], step: npt.NDArray[np.float32]) -> npt.NDArray[np.bool_]:
-    """:func:`flying_pixels` of ``z`` (inf: no reading) with its edge step ``step``."""
     lo = cv2.erode(z, _CROSS, borderType=cv2.BORDER_CONSTANT, borderValue=np.inf)
     hi = cv2.dilate(np.where(np.isinf(z), np.float32(0), z), _CROSS,
                     borderType=cv2.BORDER_CONSTANT, borderValue=0)
