@@ -60,3 +60,16 @@ def test_matches_are_keyed_by_the_ground_truth_id():
     assert ids == {1: 7, 2: 8}
     ids, _ = pan_check.matched_ids(tracks[:2], [7, 8], gt_after, None)
     assert ids == {0: 7, 1: 8}
+
+
+def test_only_ends_in_view_with_a_live_track_at_the_pan_are_compared():
+    """An id is kept across the pan when the end in view in the pan's eve, with its track
+    still reported then, is next matched to that track; an end that left the image before
+    the pan, or whose track had ended, has no id to keep (counted apart)."""
+    row = pan_check._Row
+    rows = [row(0, 0, {0: 5, 1: 6, 2: 7, 3: 8}, {5, 6, 7, 8}, {0, 1, 2, 3}),
+            row(1, 0, {0: 5, 1: 6}, {5, 6, 7}, {0, 1, 3}),  # 2 left the image, 8 ended
+            row(2, 0, {0: 5, 1: 9, 2: 10, 3: 11}, {5, 9, 10, 11}, {0, 1, 2, 3})]
+    assert pan_check.ids_across(rows, 2) == (1, 2, 2)  # 0 kept, 1 lost; 2 and 3 apart
+    assert pan_check.ids_across(rows, 1) == (2, 4, 0)  # across frame 1: 2, 3 unmatched there
+    assert pan_check.ids_across(rows, 0) == (0, 0, 0)  # no eve

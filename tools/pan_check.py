@@ -3,10 +3,14 @@
 For every bag of the rooms suite whose camera pans (``*-pan``; the pan's stamps are in the
 bag's ``endeff.details``), the tracker runs over the bag with the given parameters; tracks are
 matched to the ground truth per frame as ``endeff eval`` does (``scoring.score_frame``).
-Reported per bag: how many end-effectors (the ground truth's ``id``) matched just before the
-pan are matched to the same track id when next matched after it, and the false positives per
-frame before the pan (after its first 10 frames), at most during the pan and the 2 s after
-it, and from 2 s after the pan's end on.
+Reported per bag: how many end-effectors (the ground truth's ``id``) in view in the last
+frame before the pan, whose track is still reported in that frame, are matched to the same
+track id when next matched after it (an end that left the image, or whose track had ended
+before the pan, has no id to keep across it: counted apart as ``ids_gone_before``); as a
+control, the same count summed over every instant of the still camera before and 2 s after
+the pan (``still_ids_*``: how well the tracker keeps ids from one match to the next without
+a pan); and the false positives per frame before the pan (after its first 10 frames), at
+most during the pan and the 2 s after it, and from 2 s after the pan's end on.
 
     python -m tools.pan_check data/rooms/mcap [--params YAML] [--jobs 2] [--json OUT]
 """
@@ -16,7 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -55,10 +59,44 @@ def matched_ids(positions: npt.NDArray[np.float64], track_ids: list[int],
     return {int(key[g]): int(track_ids[e]) for e, g in score.matches}, score.fp
 
 
+class _Row(NamedTuple):
+    """One scored frame: false positives, ``{ground-truth id: track id}``, the track ids
+    reported and the ground-truth ids in view."""
+
+    stamp_ns: int
+    fp: int
+    ids: dict[int, int]
+    alive: set[int]
+    in_view: set[int]
+
+
+def ids_across(rows: list[_Row], at: int) -> tuple[int, int, int]:
+    """``(kept, compared, gone)`` across the instant ``at`` (ns). An end is compared when it
+    is matched before and from ``at`` on, is in view in the eve (the last row before ``at``)
+    and the track last matched to it is reported there; it is kept when its first match from
+    ``at`` on is that track. ``gone`` counts the other ends matched on both sides (they left
+    the image, or their track ended, before ``at``)."""
+    before = [r for r in rows if r.stamp_ns < at]
+    if not before:
+        return 0, 0, 0
+    last: dict[int, int] = {}
+    for r in before:
+        last.update(r.ids)
+    first: dict[int, int] = {}
+    for r in rows[len(before):]:
+        for k, v in r.ids.items():
+            first.setdefault(k, v)
+    eve = before[-1]
+    both = [k for k in last if k in first]
+    compared = [k for k in both if k in eve.in_view and last[k] in eve.alive]
+    return (sum(first[k] == last[k] for k in compared), len(compared),
+            len(both) - len(compared))
+
+
 def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
     """The figures above for one pan bag."""
     tracker = Tracker(params)
-    rows: list[tuple[int, int, dict[int, int]]] = []  # stamp, false positives, gt -> track id
+    rows: list[_Row] = []
     with BagReader(bag) as reader:
         start, end = _pan_stamps(reader)
         ids_by_stamp = gt_ids(reader)
@@ -69,27 +107,29 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
                 tracks = []
             if gt is None:
                 continue
+            gt_id = ids_by_stamp.get(frame.stamp_ns)
+            if gt_id is None or len(gt_id) != len(gt):
+                gt_id = np.arange(len(gt))
             ids, fp = matched_ids(np.array([t.position for t in tracks]), [t.id for t in tracks],
-                                  gt, ids_by_stamp.get(frame.stamp_ns))
-            rows.append((frame.stamp_ns, fp, ids))
-    before = [r for r in rows if r[0] < start]
-    during = [r for r in rows if start <= r[0] < end + CLEAN_AFTER_NS]
-    after = [r for r in rows if r[0] >= end + CLEAN_AFTER_NS]
-    last: dict[int, int] = {}
-    for r in before:
-        last.update(r[2])
-    first: dict[int, int] = {}
-    for r in during + after:
-        for k, v in r[2].items():
-            first.setdefault(k, v)
-    both = [k for k in last if k in first]
-    return {'bag': bag.name, 'ids_kept': sum(first[k] == last[k] for k in both),
-            'ids_compared': len(both),
-            'fp_per_frame_before': float(np.mean([r[1] for r in before[10:]]))
+                                  gt, gt_id)
+            rows.append(_Row(frame.stamp_ns, fp, ids, {t.id for t in tracks},
+                             {int(i) for i in gt_id}))
+    before = [r for r in rows if r.stamp_ns < start]
+    during = [r for r in rows if start <= r.stamp_ns < end + CLEAN_AFTER_NS]
+    after = [r for r in rows if r.stamp_ns >= end + CLEAN_AFTER_NS]
+    kept, compared, gone = ids_across(rows, start)
+    # The control: the same comparison across every instant of a still camera (before the
+    # pan after its first 10 frames, and 2 s after it): what the tracker keeps without a pan.
+    still = [ids_across(before, r.stamp_ns) for r in before[11:]]
+    still += [ids_across(after, r.stamp_ns) for r in after[1:]]
+    return {'bag': bag.name, 'ids_kept': kept, 'ids_compared': compared,
+            'ids_gone_before': gone,
+            'still_ids_kept': sum(c[0] for c in still),
+            'still_ids_compared': sum(c[1] for c in still),
+            'fp_per_frame_before': float(np.mean([r.fp for r in before[10:]]))
             if len(before) > 10 else None,
-            'fp_max_during': max((r[1] for r in during), default=0),
-            'fp_per_frame_after_2s': float(np.mean([r[1] for r in after])) if after else None}
-
+            'fp_max_during': max((r.fp for r in during), default=0),
+            'fp_per_frame_after_2s': float(np.mean([r.fp for r in after])) if after else None}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -115,6 +155,9 @@ def main(argv: list[str] | None = None) -> int:
         report[room] = {'bags': len(rows),
                         'ids_kept': sum(r['ids_kept'] for r in rows),
                         'ids_compared': sum(r['ids_compared'] for r in rows),
+                        'ids_gone_before': sum(r['ids_gone_before'] for r in rows),
+                        'still_ids_kept': sum(r['still_ids_kept'] for r in rows),
+                        'still_ids_compared': sum(r['still_ids_compared'] for r in rows),
                         'fp_per_frame_before': mean('fp_per_frame_before', rows),
                         'fp_per_frame_after_2s': mean('fp_per_frame_after_2s', rows)}
     print_json(report, args.json)
