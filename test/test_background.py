@@ -368,6 +368,69 @@ def test_a_carried_track_only_predicted_does_not_keep_what_its_anchor_falls_on()
     assert chair_if_all_detected > 50  # the scene would show it
 
 
+def _pitched(depth: np.ndarray, pitch: float) -> np.ndarray:
+    """``depth`` (the level camera's) as seen by the camera pitched down by ``pitch`` (rad)
+    about its centre: each pixel's ray is looked up in the level image (rays that leave it
+    see the floor and the wall, as :func:`room`)."""
+    v, u = np.mgrid[0:K.height, 0:K.width].astype(np.float64)
+    ry = (v - K.cy) / K.fy
+    c, s = np.cos(pitch), np.sin(pitch)
+    ly, lz = c * ry + s, c - s * ry  # the ray in the level camera's frame (x unchanged)
+    ul = K.fx * (u - K.cx) / K.fx / lz + K.cx
+    vl = K.fy * ly / lz + K.cy
+    ui, vi = np.round(ul).astype(int), np.round(vl).astype(int)
+    inside = (ui >= 0) & (ui < K.width) & (vi >= 0) & (vi < K.height)
+    with np.errstate(divide='ignore'):
+        level = np.minimum(np.where(vl > K.cy, CAMERA_HEIGHT * K.fy / (vl - K.cy), np.inf), WALL_Z)
+    level[inside] = depth[vi[inside], ui[inside]]
+    return (level / lz).astype(np.float32)  # the ray's length, as depth along the new axis
+
+
+def _tilt(degrees: float, frames: int) -> tuple[Tracker, list[int], list[int]]:
+    """The room with the chair and a swaying, waving person; from frame 40 the camera pitches
+    down by ``degrees`` over ``frames`` frames (depth only). Returns the tracker, the chair's
+    foreground points per frame, and the number of tracks per frame."""
+    tracker = Tracker(PARAMS)
+    chair, tracks = [], []
+    for k in range(130):
+        depth = moving_person_scene(k)
+        pitch = np.radians(degrees) * min(1.0, max(0.0, (k - 39) / frames))
+        result = tracker.update(frame(k, _pitched(depth, pitch) if pitch else depth))
+        p = result.estimate.points
+        chair.append(int(np.count_nonzero(p[:, 0] > CHAIR_X - 0.3)))
+        tracks.append(len(result.tracks))
+    return tracker, chair, tracks
+
+
+@pytest.mark.parametrize('degrees, frames', [(12.0, 1), (5.0, 1), (12.0, 15)])
+def test_a_camera_tilt_relearns_and_fits_the_floor_anew(degrees, frames):
+    """A tilt changes depths mostly one way (down: nearer nearly everywhere), which the
+    background's own camera-motion test does not take for a turn; the floor no longer lying
+    where it did is the sign. The chair is gone again within 2 s of the tilt's end (it stays
+    for good when the tilt goes unseen) and the floor is the tilted one."""
+    tracker, chair, tracks = _tilt(degrees, frames)
+    assert max(chair[20:40]) == 0  # learnt before the tilt
+    assert tracker.background.relearns >= 1
+    end = 40 + frames
+    assert max(chair[end + 60:]) == 0
+    assert max(tracks[end + 60:]) <= max(tracks[20:40]) + 1
+    true_up = np.array([0.0, -np.cos(np.radians(degrees)), -np.sin(np.radians(degrees))])
+    assert tracker._floor.normal @ true_up > np.cos(np.radians(1.0))
+
+
+def test_a_person_hiding_the_floor_is_no_camera_motion():
+    """Someone close to the camera hides most of the floor: the known plane explains too few
+    points, the floor is fitted anew, finds the same plane (or none), and nothing re-learns."""
+    tracker = Tracker(PARAMS)
+    for k in range(60):
+        depth = moving_person_scene(k)
+        if 20 <= k < 40:  # a broad body 0.9 m from the camera, from the floor up
+            paint(depth, -0.8 + 0.01 * k, 0.6 + 0.01 * k, 0.0, 1.8, 0.9)
+        tracker.update(frame(k, depth))
+    assert tracker.background.relearns == 0
+    assert tracker._floor.normal @ np.array([0.0, -1.0, 0.0]) > np.cos(np.radians(1.0))
+
+
 def test_person_moving_does_not_count_as_camera_motion():
     model = BackgroundModel()
     for k in range(90):

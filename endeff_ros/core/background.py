@@ -122,6 +122,8 @@ background model removes what never moved, with the person present from the firs
   depth at all. And while learning after a turn, a frame whose
   colour still says the scene moves re-learns again, so the background is the view after
   the camera stopped, not one taken mid-turn, whose furniture edges would stay "changed".
+  A tilt changes depths mostly one way and passes this test; the floor plane turning
+  (``cloud._turned_floor``) tells it instead, through :meth:`BackgroundModel.camera_moved`.
   That colour is compared with the frame that re-learnt last (its grey image is kept when
   the older ones are dropped): a braking camera's last step, too small for the depth, is
   seen only so.
@@ -392,6 +394,7 @@ class BackgroundModel:
         self.relearns = 0  # camera motions detected
         self.resets = 0  # re-learns asked for (reset())
         self._reset_requested = False
+        self._moved_requested = False
         self._clear()
 
     def _clear(self) -> None:
@@ -415,6 +418,12 @@ class BackgroundModel:
         """Re-learn from the next frame (the ``reset_background`` service). Only sets a flag,
         so it may be called from another thread than :meth:`foreground`'s."""
         self._reset_requested = True
+
+    def camera_moved(self) -> None:
+        """The camera moved by another sign than this model's (the floor plane turned: a
+        tilt, which changes depths mostly one way): the next :meth:`foreground` re-learns as
+        for a camera motion it saw itself (counted in ``relearns``, tracks carried)."""
+        self._moved_requested = True
 
     @property
     def learning(self) -> bool:
@@ -561,7 +570,7 @@ class BackgroundModel:
         stride = params.pixel_stride
         if self._reset_requested or self._bg is None or self._bg.shape != d.shape:
             self.resets += self._reset_requested
-            self._reset_requested = False
+            self._reset_requested = self._moved_requested = False
             self._learn(d, valid, t, params)
             self._remember(stamp_ns, d, valid, candidate, params)
             if color is not None:  # the first grey image (nothing to compare it with yet)
@@ -604,25 +613,27 @@ class BackgroundModel:
         # while floor and walls stood still) waits for the next word of the colour.
         colour_live = (self._seen_color is not None
                        and stamp_ns - self._seen_color <= COLOR_LAG_S * 1e9)
+        moved, self._moved_requested = self._moved_requested, False
         if (n_known >= MIN_KNOWN_FRACTION * d.size and stirred is None
                 and (settling or scene_moved or not colour_live)):
             recent_far = farther | (self._far_t > t - RECENT_FAR_S)
             f = params.background_camera_motion_fraction * n_known
             if settling or scene_moved:
                 f /= SETTLING_DIVISOR
-            if (settling and scene_moved) or (np.count_nonzero(nearer) >= f
-                                              and np.count_nonzero(recent_far & known) >= f):
-                if not settling:
-                    # The turn begins (tracks that became foreground as it began sit on
-                    # furniture): these tracks are carried through it.
-                    self._carried |= {i for i, since in self._fg_ids.items()
-                                      if since <= t - CARRY_AFTER_S}
-                self.relearns += 1
-                self._learn(d, valid, t, params)
-                self._settling = True
-                self._labels, _ = depth_components(
-                    d, candidate, stride, far_side_pixels(d, stride, flying=colour_live))
-                return candidate.copy()
+            moved = moved or (settling and scene_moved) or (
+                np.count_nonzero(nearer) >= f and np.count_nonzero(recent_far & known) >= f)
+        if moved:
+            if not settling:
+                # The turn begins (tracks that became foreground as it began sit on
+                # furniture): these tracks are carried through it.
+                self._carried |= {i for i, since in self._fg_ids.items()
+                                  if since <= t - CARRY_AFTER_S}
+            self.relearns += 1
+            self._learn(d, valid, t, params)
+            self._settling = True
+            self._labels, _ = depth_components(
+                d, candidate, stride, far_side_pixels(d, stride, flying=colour_live))
+            return candidate.copy()
 
         # Farther readings, and readings where nothing was seen yet (no reading is beyond
         # the sensor's range: the farthest of all), are adopted once FAR_FRAMES consecutive

@@ -225,6 +225,11 @@ def _refine_plane(points: npt.NDArray[np.float64],
 #: Weight of a frame's own least-squares floor when a known floor follows it (see
 #: :func:`follow_floor`); the known plane converges to what the frames show in about ten.
 FLOOR_FOLLOW = 0.2
+#: A floor found anew at more than this angle (degrees) to the known plane, at the same
+#: height below the camera within FLOOR_SAME_HEIGHT_M (metres), means the camera turned
+#: (see :func:`_turned_floor`).
+FLOOR_TURNED_DEG = 2.0
+FLOOR_SAME_HEIGHT_M = 0.05
 #: At most this many points of a frame's floor feed :func:`follow_floor`'s fit.
 _FOLLOW_SAMPLE = 4096
 
@@ -285,6 +290,39 @@ def _voxel_means(cols: Columns, size: float) -> npt.NDArray[np.float64]:
     return out
 
 
+def _fit_inside(cols: Columns, keep: npt.NDArray[np.bool_],
+               params: EndeffParams) -> FloorPlane | None:
+    """:func:`fit_floor` on a sample of the points ``keep`` (inside the box)."""
+    inside = np.flatnonzero(keep)
+    inside = inside[::max(1, len(inside) // _FLOOR_SAMPLE)]
+    return fit_floor(np.stack([c[inside] for c in cols], axis=1),
+                     distance=params.floor_distance, max_tilt_deg=params.floor_max_tilt_deg,
+                     min_fraction=params.floor_min_fraction,
+                     iterations=params.floor_iterations, sample=_FLOOR_SAMPLE)
+
+
+def _turned_floor(floor: FloorPlane, cols: Columns, keep: npt.NDArray[np.bool_],
+                  params: EndeffParams) -> FloorPlane | None:
+    """The floor this frame shows, when the known ``floor`` no longer explains it because
+    the camera turned about its centre; None otherwise.
+
+    Asked only when too few points lie near the known plane for :func:`follow_floor`: a
+    person close to the camera hiding the floor, a view with little floor, or a camera that
+    tilted. A tilt changes depths mostly one way (down: nearer everywhere), so the
+    background's own test, which wants pixels both nearer and farther, misses it; but a
+    static floor that now lies at another angle to the camera can only mean the camera
+    turned. A floor found anew at more than ``FLOOR_TURNED_DEG`` to the known one, at the
+    same height below the camera (within ``FLOOR_SAME_HEIGHT_M``: a head turns about a point
+    near its camera), is that sign. A hidden floor finds no plane or the same one again, and
+    a plane through what hides it (a slope of a body and the strip of floor left) lies at
+    another height."""
+    fitted = _fit_inside(cols, keep, params)
+    if fitted is None or abs(fitted.offset - floor.offset) > FLOOR_SAME_HEIGHT_M:
+        return None
+    cos = float(np.clip(fitted.normal @ floor.normal, -1.0, 1.0))
+    return fitted if math.degrees(math.acos(cos)) > FLOOR_TURNED_DEG else None
+
+
 def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
                      params: EndeffParams, *, floor: FloorPlane | None = None,
                      background: BackgroundModel | None = None, stamp_ns: int = 0,
@@ -308,23 +346,25 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
     if params.floor_removal:
         known = floor is not None
         if floor is None or floor.refit:
-            inside = np.flatnonzero(keep)
-            inside = inside[::max(1, len(inside) // _FLOOR_SAMPLE)]
-            fitted = fit_floor(np.stack([x[inside], y[inside], z[inside]], axis=1),
-                               distance=params.floor_distance,
-                               max_tilt_deg=params.floor_max_tilt_deg,
-                               min_fraction=params.floor_min_fraction,
-                               iterations=params.floor_iterations, sample=_FLOOR_SAMPLE)
+            fitted = _fit_inside((x, y, z), keep, params)
             if fitted is not None:
                 floor, known = fitted, False
             elif floor is not None:  # none found: the old plane is better than none
                 floor = FloorPlane(floor.normal, floor.offset)
         if floor is not None:
             height = floor.heights(x, y, z)
-            if known:  # the next frame's floor: this one's, following what it shows
+            if known:
                 near = np.flatnonzero(keep & (np.abs(height) < params.floor_distance))
-                floor = follow_floor(floor, (x, y, z), near, int(np.count_nonzero(keep)),
-                                     params)
+                n_inside = int(np.count_nonzero(keep))
+                turned = (_turned_floor(floor, (x, y, z), keep, params)
+                          if len(near) < params.floor_min_fraction * n_inside else None)
+                if turned is not None:  # the camera moved (module constant FLOOR_TURNED_DEG)
+                    floor = turned
+                    height = floor.heights(x, y, z)
+                    if background is not None:
+                        background.camera_moved()
+                else:  # the next frame's floor: this one's, following what it shows
+                    floor = follow_floor(floor, (x, y, z), near, n_inside, params)
             keep &= height > params.floor_distance
     if params.wall_min_area > 0:
         keep &= ~wall_points(x, y, z, keep, valid, intrinsics, params)
