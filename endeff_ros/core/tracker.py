@@ -93,7 +93,7 @@ CASE_B_HOLD_FACTOR = 2
 
 
 class _Lost(NamedTuple):
-    """A confirmed track dropped in update number ``frame``, last predicted at ``position``."""
+    """A track dropped in update number ``frame``, last predicted at ``position``."""
 
     id: int
     position: npt.NDArray[np.float64]
@@ -156,7 +156,7 @@ class Tracker:
         self._floor: FloorPlane | None = None
         self._relearns = self.background.relearns  # camera motions seen (the floor is refitted)
         self._frame = 0  # updates since the reset
-        self._lost: list[_Lost] = []  # confirmed tracks dropped lately
+        self._lost: list[_Lost] = []  # tracks dropped lately
 
     def reset_background(self) -> None:
         """Re-learn the static background and fit the floor anew from the next frame (the
@@ -427,8 +427,7 @@ class Tracker:
                 # (a one-off candidate is not kept alive).
                 if (pr.node < 0 or track.missed + 1 > min(p.keep_frames, track.hits)
                         or track.hits < p.confirm_hits):
-                    if track.hits >= p.confirm_hits:
-                        self._lost.append(_Lost(track.id, pr.position, self._frame))
+                    self._lost.append(_Lost(track.id, pr.position, self._frame))
                     continue
                 self._take_prediction(track, pr, pred_geo, missed=True)
                 survivors.append(track)
@@ -442,13 +441,15 @@ class Tracker:
         return self._drop_duplicates(survivors)
 
     def _revived_ids(self, positions: list[npt.NDArray[np.float64]]) -> list[int]:
-        """Ids for new tracks at ``positions``. A confirmed track dropped within the last
+        """Ids for new tracks at ``positions``. A track dropped within the last
         ``keep_frames`` frames gives its id back to the nearest new track within
         ``revive_distance`` of where it was last predicted (nearest pairs first): the same
         end-effector found again after a short loss (a hand that was no extremum for a few
-        frames, a foot lost while the camera turns) keeps its id for a subscriber. The
-        distance allows for T frames of motion at about 1 m/s since the loss (0.27 m at 30
-        Hz). Otherwise a new id, never used before."""
+        frames, a foot lost while the camera turns) keeps its id for a subscriber. So does
+        one too young to have been kept alive (``confirm_hits``): an end that is an extreme
+        in a frame or two at a time would otherwise get a new id each time. The distance
+        allows for T frames of motion at about 1 m/s since the loss (0.27 m at 30 Hz).
+        Otherwise a new id, never used before."""
         p = self.params
         self._lost = [lost for lost in self._lost if self._frame - lost.frame <= p.keep_frames]
         ids: list[int | None] = [None] * len(positions)
