@@ -358,7 +358,7 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
                 n_inside = int(np.count_nonzero(keep))
                 turned = (_turned_floor(floor, (x, y, z), keep, params)
                           if len(near) < params.floor_min_fraction * n_inside else None)
-                if turned is not None:  # the camera moved (module constant FLOOR_TURNED_DEG)
+                if turned is not None:  # the camera turned (see _turned_floor)
                     floor = turned
                     height = floor.heights(x, y, z)
                     if background is not None:
