@@ -47,15 +47,21 @@ def _pan_stamps(reader: BagReader) -> tuple[int, int]:
     return int(pan['start_stamp_ns']), int(pan['end_stamp_ns'])
 
 
+def end_ids(gt: npt.NDArray[np.float64],
+            gt_id: npt.NDArray[np.int64] | None) -> npt.NDArray[np.int64]:
+    """The name of each ground-truth row: the ``id`` field (``gt_id``, aligned with ``gt``),
+    whose row changes when another end-effector leaves or enters the view, as during a pan;
+    without ids (None, or not aligned), the row index."""
+    return gt_id if gt_id is not None and len(gt_id) == len(gt) else np.arange(len(gt))
+
+
 def matched_ids(positions: npt.NDArray[np.float64], track_ids: list[int],
                 gt: npt.NDArray[np.float64], gt_id: npt.NDArray[np.int64] | None,
                 ) -> tuple[dict[int, int], int]:
     """``({ground-truth id: track id}, false positives)`` of one frame scored as ``endeff
-    eval`` does. The ground truth's ``id`` field (``gt_id``, aligned with ``gt``) names an
-    end-effector: its row changes when another one leaves or enters the view, as during a
-    pan. Without ids (None, or not aligned), the row index."""
+    eval`` does, the ground truth named by :func:`end_ids`."""
     score = score_frame(np.asarray(positions, dtype=np.float64).reshape(-1, 3), gt[:, :3])
-    key = gt_id if gt_id is not None and len(gt_id) == len(gt) else np.arange(len(gt))
+    key = end_ids(gt, gt_id)
     return {int(key[g]): int(track_ids[e]) for e, g in score.matches}, score.fp
 
 
@@ -108,12 +114,10 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
             if gt is None:
                 continue
             gt_id = ids_by_stamp.get(frame.stamp_ns)
-            if gt_id is None or len(gt_id) != len(gt):
-                gt_id = np.arange(len(gt))
             ids, fp = matched_ids(np.array([t.position for t in tracks]), [t.id for t in tracks],
                                   gt, gt_id)
             rows.append(_Row(frame.stamp_ns, fp, ids, {t.id for t in tracks},
-                             {int(i) for i in gt_id}))
+                             {int(i) for i in end_ids(gt, gt_id)}))
     before = [r for r in rows if r.stamp_ns < start]
     during = [r for r in rows if start <= r.stamp_ns < end + CLEAN_AFTER_NS]
     after = [r for r in rows if r.stamp_ns >= end + CLEAN_AFTER_NS]
