@@ -9,12 +9,16 @@ can run the model for several seconds of 30 Hz stamps.
 from __future__ import annotations
 
 import dataclasses
+import functools
+import sys
 
 import cv2
 import numpy as np
 import pytest
 
+from endeff_ros.core import cloud
 from endeff_ros.core.background import BackgroundModel, bridge_dropouts, depth_components
+from endeff_ros.core.cloud import FloorPlane
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.single_frame import estimate_frame
 from endeff_ros.core.tracker import Tracker
@@ -429,6 +433,110 @@ def test_a_person_hiding_the_floor_is_no_camera_motion():
         tracker.update(frame(k, depth))
     assert tracker.background.relearns == 0
     assert tracker._floor.normal @ np.array([0.0, -1.0, 0.0]) > np.cos(np.radians(1.0))
+
+
+def _raised(metres: float, frames: int, monkeypatch) -> tuple[Tracker, list[int], list[int]]:
+    """The room with the chair and a swaying, waving person; from frame 40 the camera is
+    raised by ``metres`` (lowered when negative) over ``frames`` frames (depth only). Returns
+    the tracker, the chair's foreground points per frame, and the number of tracks per frame."""
+    tracker = Tracker(PARAMS)
+    chair, tracks = [], []
+    for k in range(130):
+        step = min(1.0, max(0.0, (k - 39) / frames))
+        monkeypatch.setattr(sys.modules[__name__], 'CAMERA_HEIGHT', 1.1 + metres * step)
+        result = tracker.update(frame(k, moving_person_scene(k)))
+        chair.append(points_near(result.estimate.points, CHAIR_X, CHAIR_Z))
+        tracks.append(len(result.tracks))
+    return tracker, chair, tracks
+
+
+@pytest.mark.parametrize('metres, frames', [(-0.3, 1), (-0.1, 1), (-0.3, 15), (0.3, 1)])
+def test_a_camera_raised_or_lowered_relearns_and_finds_the_floor(metres, frames, monkeypatch):
+    """Lowered, the camera sees depths nearer nearly everywhere (the chair stayed for good);
+    the floor found parallel at another height, off the learnt background, is the sign.
+    Raised, the background's own test sees it (floor farther, edges both ways), and the
+    floor is fitted anew until a plane is found. The chair is gone within 2 s of the end."""
+    tracker, chair, tracks = _raised(metres, frames, monkeypatch)
+    assert max(chair[20:40]) == 0  # learnt before
+    assert tracker.background.relearns >= 1
+    end = 40 + frames
+    assert max(chair[end + 60:]) == 0
+    assert max(tracks[end + 60:]) <= max(tracks[20:40]) + 1
+    assert abs(tracker._floor.offset - (1.1 + metres)) < 0.03
+
+
+def add_table_top(depth: np.ndarray, x0: float, x1: float, z0: float, z1: float,
+                  top: float) -> None:
+    """A horizontal table top at height ``top``, world x0..x1 and depths z0..z1 (the camera
+    above it sees it from its front edge back)."""
+    v = np.arange(K.height, dtype=np.float64)
+    with np.errstate(divide='ignore'):
+        z = np.where(v > K.cy, (CAMERA_HEIGHT - top) * K.fy / (v - K.cy), np.inf)
+    for row in np.flatnonzero((z >= z0) & (z <= z1)):
+        u0, u1 = _u(x0, z[row]), _u(x1, z[row])
+        np.minimum(depth[row, max(u0, 0):max(u1, 0)], np.float32(z[row]),
+                   out=depth[row, max(u0, 0):max(u1, 0)])
+    paint(depth, x0, x1, top - 0.04, top, z0)  # its front edge
+
+
+def _strided(depth: np.ndarray):
+    """The strided image, its valid pixels, their x, y, z columns and the box mask, as
+    :func:`cloud.foreground_cloud` makes them."""
+    z, valid = cloud._valid_pixels(depth, K, PARAMS.pixel_stride,
+                                   (PARAMS.box_min_z, PARAMS.box_max_z), PARAMS.depth_median)
+    cols = cloud._columns(z, valid, K, PARAMS.pixel_stride)
+    return z, valid, cols, cloud._in_box(*cols, PARAMS)
+
+
+def test_only_a_plane_off_the_learnt_background_means_a_camera_raised_or_lowered(monkeypatch):
+    """A (wide) table top is a horizontal plane at another height than the floor, which a
+    person close to the camera may leave as the best plane: it is learnt background, at its
+    depths; the floor seen by a lowered camera is not."""
+    model = BackgroundModel()
+    scene = room().copy()
+    add_table_top(scene, -1.5, 1.5, 1.6, 3.4, 0.75)
+    for k in range(30):
+        estimate_frame(frame(k, scene), PARAMS, background=model)
+    up = np.array([0.0, -1.0, 0.0])
+    z, valid, cols, keep = _strided(frame(30, scene).depth)
+    table = FloorPlane(up, CAMERA_HEIGHT - 0.75)
+    assert np.count_nonzero(keep & (np.abs(table.heights(*cols)) < PARAMS.floor_distance)) > 200
+    assert not cloud._off_background(model, z, valid, cols, keep, PARAMS, table)
+    monkeypatch.setattr(sys.modules[__name__], 'CAMERA_HEIGHT', 0.8)
+    lowered = room().copy()
+    add_table_top(lowered, -1.5, 1.5, 1.6, 3.4, 0.75)
+    z, valid, cols, keep = _strided(frame(31, lowered).depth)
+    assert cloud._off_background(model, z, valid, cols, keep, PARAMS, FloorPlane(up, 0.8))
+    # Through the whole decision: the floor the lowered camera sees counts ...
+    known = FloorPlane(up, 1.1)
+    check = functools.partial(cloud._off_background, model, z, valid, cols, keep, PARAMS)
+    moved = cloud._moved_floor(known, cols, keep, PARAMS, check)
+    assert moved is not None and abs(moved.offset - 0.8) < 0.03
+    # ... the table's plane, the best one with the floor hidden, does not.
+    monkeypatch.setattr(sys.modules[__name__], 'CAMERA_HEIGHT', 1.1)
+    z, valid, cols, keep = _strided(frame(32, scene).depth)
+    above = keep & (table.heights(*cols) > -PARAMS.floor_distance)
+    found = cloud._moved_floor(known, cols, above, PARAMS, lambda plane: True)
+    assert found is not None and abs(found.offset - table.offset) < 0.03
+    check = functools.partial(cloud._off_background, model, z, valid, cols, keep, PARAMS)
+    assert cloud._moved_floor(known, cols, above, PARAMS, check) is None
+
+
+def test_a_floor_refit_that_finds_no_plane_is_tried_again(monkeypatch):
+    """After a re-learn asked for (the camera was moved on purpose), the floor is fitted
+    anew; a frame that shows none (here: a board held before the camera) keeps the old plane for
+    that frame and the next frame tries again, so the plane the camera now sees is found."""
+    tracker = Tracker(PARAMS.replace(background=False))
+    for k in range(10):
+        tracker.update(frame(k, moving_person_scene(k)))
+    assert abs(tracker._floor.offset - 1.1) < 0.03
+    tracker.reset_background()
+    monkeypatch.setattr(sys.modules[__name__], 'CAMERA_HEIGHT', 1.4)
+    tracker.update(frame(10, np.full((K.height, K.width), 0.6, np.float32)))  # a board
+    assert tracker._floor.refit and abs(tracker._floor.offset - 1.1) < 0.03
+    for k in range(11, 20):
+        tracker.update(frame(k, moving_person_scene(k)))
+    assert abs(tracker._floor.offset - 1.4) < 0.03
 
 
 def test_person_moving_does_not_count_as_camera_motion():

@@ -450,7 +450,8 @@ def test_a_floor_to_refit_is_fitted_anew_or_kept_when_none_is_found():
     """After a camera motion the tracker asks for the floor to be fitted anew
     (``refit``): where the frame shows one, the fit replaces the old plane; where it shows
     none (a view of the wall, or a failed fit), the old plane is kept rather than no floor
-    at all, which would leave the whole floor foreground."""
+    at all, which would leave the whole floor foreground, and is still to be fitted anew in
+    the next frame."""
     camera = tilted(10.0, 0.0)
     stale = FloorPlane(up(tilted(0.0, 0.0)), camera.height, refit=True)
     params = EndeffParams(box_max_z=4.3)
@@ -461,4 +462,4 @@ def test_a_floor_to_refit_is_fitted_anew_or_kept_when_none_is_found():
     _, kept = foreground_cloud(scenes.shoot(person, camera, floor=False).frame.depth, KINECT_640,
                                params, floor=stale)
     assert np.array_equal(kept.normal, stale.normal) and kept.offset == stale.offset
-    assert not kept.refit
+    assert kept.refit

@@ -122,8 +122,9 @@ background model removes what never moved, with the person present from the firs
   depth at all. And while learning after a turn, a frame whose
   colour still says the scene moves re-learns again, so the background is the view after
   the camera stopped, not one taken mid-turn, whose furniture edges would stay "changed".
-  A tilt changes depths mostly one way and passes this test; the floor plane turning
-  (``cloud._turned_floor``) tells it instead, through :meth:`BackgroundModel.camera_moved`.
+  A tilt, or the camera raised or lowered, changes depths mostly one way and passes this
+  test; the floor plane moving (``cloud._moved_floor``) tells it instead, through
+  :meth:`BackgroundModel.camera_moved`.
   That colour is compared with the frame that re-learnt last (its grey image is kept when
   the older ones are dropped): a braking camera's last step, too small for the depth, is
   seen only so.
@@ -175,6 +176,8 @@ FLYING_FRACTION = 0.25
 RECENT_FAR_S = 0.25
 #: Camera motion is only judged when this fraction of the image has a known background.
 MIN_KNOWN_FRACTION = 0.1
+#: :meth:`BackgroundModel.changed_fraction` answers only over at least this many pixels.
+MIN_CHANGED_PIXELS = 50
 #: While learning after a camera motion, a motion this many times smaller re-learns again:
 #: the camera is still settling (a pan brakes), and a background taken mid-turn would leave
 #: the furniture's edges "changed" for good.
@@ -440,6 +443,22 @@ class BackgroundModel:
     def background(self) -> npt.NDArray[np.float32] | None:
         """(H, W) background depth of the strided image, metres (0: not known), or None."""
         return self._bg
+
+    def changed_fraction(self, depth: npt.NDArray[np.floating], mask: npt.NDArray[np.bool_],
+                         params: EndeffParams) -> float | None:
+        """Of the pixels ``mask`` of the strided ``depth`` image whose background is known, the
+        fraction whose depth differs from it by more than the margin; None with fewer than
+        ``MIN_CHANGED_PIXELS`` of them (or nothing learnt). Read-only: the frame is not
+        learnt from."""
+        if self._bg is None or self._bg.shape != depth.shape:
+            return None
+        bg = self._bg[mask]
+        d = np.asarray(depth, dtype=np.float32)[mask][bg > 0]
+        bg = bg[bg > 0]
+        if len(bg) < MIN_CHANGED_PIXELS:
+            return None
+        return float(np.count_nonzero(np.abs(d - bg) > _margin(bg, params.background_margin))
+                     / len(bg))
 
     def _clock(self, stamp_ns: int) -> float:
         """Model time (s): the stamp, never going back (a bag loop continues the clock)."""

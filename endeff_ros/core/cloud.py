@@ -22,6 +22,8 @@ from .params import EndeffParams
 from .types import Intrinsics
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     import numpy.typing as npt
 
     from .background import BackgroundModel
@@ -38,7 +40,8 @@ class FloorPlane:
     """Plane ``normal . x + offset = 0`` with ``normal`` pointing up (towards -y), unit length.
 
     ``refit``: a known plane that may no longer hold (the camera moved): :func:`foreground_cloud`
-    fits the floor anew and uses this one only if no floor is found.
+    fits the floor anew and uses this one only if no floor is found, returning it still
+    marked ``refit`` so that the next frame tries again.
     """
 
     normal: npt.NDArray[np.float64]
@@ -227,9 +230,12 @@ def _refine_plane(points: npt.NDArray[np.float64],
 FLOOR_FOLLOW = 0.2
 #: A floor found anew at more than this angle (degrees) to the known plane, at the same
 #: height below the camera within FLOOR_SAME_HEIGHT_M (metres), means the camera turned
-#: (see :func:`_turned_floor`).
+#: (see :func:`_moved_floor`).
 FLOOR_TURNED_DEG = 2.0
 FLOOR_SAME_HEIGHT_M = 0.05
+#: A floor found parallel to the known one at another height means the camera was raised or
+#: lowered when at least this fraction of its points lies off the learnt background.
+FLOOR_MOVED_CHANGED = 0.5
 #: At most this many points of a frame's floor feed :func:`follow_floor`'s fit.
 _FOLLOW_SAMPLE = 4096
 
@@ -301,26 +307,53 @@ def _fit_inside(cols: Columns, keep: npt.NDArray[np.bool_],
                      iterations=params.floor_iterations, sample=_FLOOR_SAMPLE)
 
 
-def _turned_floor(floor: FloorPlane, cols: Columns, keep: npt.NDArray[np.bool_],
-                  params: EndeffParams) -> FloorPlane | None:
+def _moved_floor(floor: FloorPlane, cols: Columns, keep: npt.NDArray[np.bool_],
+                 params: EndeffParams,
+                 off_background: Callable[[FloorPlane], bool] | None = None,
+                 ) -> FloorPlane | None:
     """The floor this frame shows, when the known ``floor`` no longer explains it because
-    the camera turned about its centre; None otherwise.
+    the camera turned or was raised or lowered; None otherwise.
 
     Asked only when too few points lie near the known plane for :func:`follow_floor`: a
     person close to the camera hiding the floor, a view with little floor, or a camera that
-    tilted. A tilt changes depths mostly one way (down: nearer everywhere), so the
-    background's own test, which wants pixels both nearer and farther, misses it; but a
-    static floor that now lies at another angle to the camera can only mean the camera
-    turned. A floor found anew at more than ``FLOOR_TURNED_DEG`` to the known one, at the
-    same height below the camera (within ``FLOOR_SAME_HEIGHT_M``: a head turns about a point
-    near its camera), is that sign. A hidden floor finds no plane or the same one again, and
-    a plane through what hides it (a slope of a body and the strip of floor left) lies at
-    another height."""
+    moved. A tilt changes depths mostly one way (down: nearer everywhere), and so does a
+    camera lowered (a robot's torso going down), so the background's own test, which wants
+    pixels both nearer and farther, misses them; but a static floor that now lies elsewhere
+    can only mean the camera moved.
+
+    - Turned: a floor found anew at more than ``FLOOR_TURNED_DEG`` to the known one, at the
+      same height below the camera (within ``FLOOR_SAME_HEIGHT_M``: a head turns about a
+      point near its camera). A hidden floor finds no plane or the same one again, and a
+      plane through what hides it (a slope of a body and the strip of floor left) lies at
+      another height.
+    - Raised or lowered: a floor found anew parallel to the known one (within
+      ``FLOOR_TURNED_DEG``) at another height, whose points mostly lie off the learnt
+      background (``off_background``, given with a background model). The check is what
+      tells a lowered camera from a table top or a seat found while a person hides the
+      floor: those are learnt background, at the depths they always had; a floor seen
+      from another height is not.
+    """
     fitted = _fit_inside(cols, keep, params)
-    if fitted is None or abs(fitted.offset - floor.offset) > FLOOR_SAME_HEIGHT_M:
+    if fitted is None:
         return None
     cos = float(np.clip(fitted.normal @ floor.normal, -1.0, 1.0))
-    return fitted if math.degrees(math.acos(cos)) > FLOOR_TURNED_DEG else None
+    turned = math.degrees(math.acos(cos)) > FLOOR_TURNED_DEG
+    if abs(fitted.offset - floor.offset) <= FLOOR_SAME_HEIGHT_M:
+        return fitted if turned else None
+    if turned or off_background is None:
+        return None
+    return fitted if off_background(fitted) else None
+
+
+def _off_background(background: BackgroundModel, z_image: npt.NDArray[np.floating],
+                    valid: npt.NDArray[np.bool_], cols: Columns, keep: npt.NDArray[np.bool_],
+                    params: EndeffParams, plane: FloorPlane) -> bool:
+    """True when most of ``plane``'s points inside the box (``keep``) differ in depth from
+    ``background``'s (FLOOR_MOVED_CHANGED of those whose background is known)."""
+    on = np.zeros(valid.shape, dtype=bool)
+    on[valid] = keep & (np.abs(plane.heights(*cols)) < params.floor_distance)
+    changed = background.changed_fraction(z_image, on, params)
+    return changed is not None and changed >= FLOOR_MOVED_CHANGED
 
 
 def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
@@ -349,17 +382,19 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
             fitted = _fit_inside((x, y, z), keep, params)
             if fitted is not None:
                 floor, known = fitted, False
-            elif floor is not None:  # none found: the old plane is better than none
-                floor = FloorPlane(floor.normal, floor.offset)
+            else:  # none found: the old plane (better than none), fitted again next frame
+                known = False
         if floor is not None:
             height = floor.heights(x, y, z)
             if known:
+                off_background = None if background is None else functools.partial(
+                    _off_background, background, z_image, valid, (x, y, z), keep, params)
                 near = np.flatnonzero(keep & (np.abs(height) < params.floor_distance))
                 n_inside = int(np.count_nonzero(keep))
-                turned = (_turned_floor(floor, (x, y, z), keep, params)
-                          if len(near) < params.floor_min_fraction * n_inside else None)
-                if turned is not None:  # the camera turned (see _turned_floor)
-                    floor = turned
+                moved = (_moved_floor(floor, (x, y, z), keep, params, off_background)
+                         if len(near) < params.floor_min_fraction * n_inside else None)
+                if moved is not None:  # the camera moved (see _moved_floor)
+                    floor = moved
                     height = floor.heights(x, y, z)
                     if background is not None:
                         background.camera_moved()

@@ -165,8 +165,9 @@ class Tracker:
         self._refit_floor()
 
     def _refit_floor(self) -> None:
-        """Fit the floor anew in the next frame, keeping the current plane for the frames in
-        which none is found (a failed fit would leave the whole floor foreground)."""
+        """Fit the floor anew from the next frame on, until a frame shows one; the current
+        plane serves the frames in which none is found (no plane at all would leave the whole
+        floor foreground)."""
         if self._floor is not None:
             self._floor = replace(self._floor, refit=True)
 
