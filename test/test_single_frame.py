@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 import pytest
+import scenarios as sc
 from scipy import sparse
 from scipy.sparse import csgraph
 from scipy.spatial.transform import Rotation
@@ -234,7 +235,8 @@ def test_a_bulge_of_a_coat_is_no_end(index):
         return np.array([np.linalg.norm(shot.gt - p, axis=1).min() > 0.25 for p in positions],
                         dtype=bool).reshape(-1)
 
-    without = estimate_frame(shot.frame, EndeffParams(min_end_aspect=0.0)).positions()
+    without = estimate_frame(shot.frame, EndeffParams(min_end_aspect=0.0,
+                                                      loop_far_sides=False)).positions()
     assert far_from_labels(without).any()  # the premise: the bulge is there
     found = estimate_frame(shot.frame, EndeffParams()).positions()
     assert not far_from_labels(found).any(), np.round(found, 3)
@@ -915,6 +917,62 @@ def test_a_chain_ends_in_a_full_sub_band(min_points, found_twig):
     found = find_end_effectors(g, 0, min_geodesic=0.3, max_count=12, chain_geodesic=0.25,
                                chain_min_points=min_points)
     assert (leaves['twig'] in [node for node, _, _ in found]) == found_twig
+
+
+def _loop_graph():
+    """A 2 m loop through the root (down the sides x = -0.2 and 0.2 m, 0.6 m high, across the
+    top) and a 0.45 m leaf below the root, nodes every 0.1 m. Returns the graph and the nodes
+    of the loop's top middle and of the leaf's tip."""
+    pts = [(0.0, 0.0)]
+    pts += [(-0.1, 0.0), (-0.2, 0.0)] + [(-0.2, 0.1 * k) for k in range(1, 7)]
+    pts += [(-0.1, 0.6), (0.0, 0.6), (0.1, 0.6), (0.2, 0.6)]
+    pts += [(0.2, 0.1 * k) for k in range(5, -1, -1)] + [(0.1, 0.0)]
+    loop = list(range(len(pts)))
+    edges = list(zip(loop, loop[1:] + [0]))
+    leaf = [len(pts) + k for k in range(5)]
+    pts += [(0.0, -0.1 * k) for k in range(1, 5)] + [(0.0, -0.45)]
+    edges += list(zip([0] + leaf[:-1], leaf))
+    centroids = [(x, y, 0.0) for x, y in pts]
+    return make_graph(centroids, edges), pts.index((0.0, 0.6)), leaf[-1]
+
+
+def test_the_far_side_of_a_loop_is_flagged():
+    """The loop's top is its farthest point from the root and the first end-effector; its
+    path runs down one side, and the other side's middle, 0.5 m from the top and from the
+    root along that side, is the next extreme: it ends no chain (its two neighbours reach
+    the found path at points 1 m apart), while the leaf ends one."""
+    g, top, tip = _loop_graph()
+    sides: list[bool] = []
+    found = find_end_effectors(g, 0, min_geodesic=0.3, max_count=12, loop_sides=sides)
+    nodes = [node for node, _, _ in found]
+    assert nodes[0] == top and tip in nodes and len(nodes) == 3
+    far = nodes[1]
+    assert np.allclose(np.abs(g.centroids[far]), [0.2, 0.3, 0.0])
+    assert found[1][2] == pytest.approx(0.5)
+    assert sides == [False, True, False]
+    # Without the question nothing changes.
+    assert [node for node, _, _ in find_end_effectors(g, 0, min_geodesic=0.3,
+                                                      max_count=12)] == nodes
+
+
+@pytest.mark.parametrize('arm', ['folded', 'clasped'])
+def test_the_elbow_of_a_closed_arm_is_no_end(arm):
+    """Arms folded on the chest, or hands clasped in front of it: the elbow on the far side of
+    the loop the arms close was an extreme 0.23-0.35 m from every labelled end; it is kept
+    apart (``loop_sides``) and every reported end lies on a labelled one."""
+    pose = sc.ARM_FOLDED if arm == 'folded' else sc.clap_arm(0.0)
+    shot = scenes.shoot(sc.person(pose), scenes.LEVEL, floor=True)
+
+    def farthest(positions):
+        return max(float(np.linalg.norm(shot.gt[:, :3] - p, axis=1).min()) for p in positions)
+
+    before = estimate_frame(shot.frame, EndeffParams(loop_far_sides=False))
+    assert farthest(before.positions()) > 0.2  # premise: the elbow was reported
+    est = estimate_frame(shot.frame, EndeffParams())
+    assert farthest(est.positions()) < 0.1
+    sides = [c.position for e in est.entities for c in e.loop_sides]
+    assert sides and farthest(sides) > 0.2
+    assert len(est.positions()) == len(before.positions()) - len(sides)
 
 
 @functools.cache

@@ -191,6 +191,7 @@ def path_to_sources(pred: npt.NDArray[np.intp], node: int) -> npt.NDArray[np.int
 def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
                        max_count: int, chain_geodesic: float | None = None,
                        chain_subbands: int = 3, chain_min_points: int = 1,
+                       loop_sides: list[bool] | None = None,
                        ) -> list[tuple[int, npt.NDArray[np.intp], float]]:
     """Iterated Dijkstra with zero-weight edges along each found path (Baak et al.).
 
@@ -215,6 +216,9 @@ def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
     head do the same. The evidence for the rule (how many true and false extremes below g
     end chains) is in docs/design.md.
     ``chain_geodesic`` None or >= g: g alone, as the paper.
+
+    ``loop_sides``: a list that receives, per end-effector returned, whether it is the far
+    side of a loop (:func:`_loop_far_side`); None: not asked.
     """
     pred_root = graph.pred[root]
     low = min_geodesic if chain_geodesic is None else min(chain_geodesic, min_geodesic)
@@ -232,9 +236,37 @@ def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
             if node < 0:
                 break
         found.append((node, path_to_sources(pred_root, node), float(dist[node])))
+        if loop_sides is not None:
+            loop_sides.append(len(sources) > 1
+                              and _loop_far_side(graph, node, dist, pred, min_geodesic))
         # Zero-weight edges from every node of the new path to the target: add them as sources.
         sources.extend(path_to_sources(pred, node)[:-1].tolist())
     return found
+
+
+def _loop_far_side(graph: TopologyGraph, node: int, dist: npt.NDArray[np.float64],
+                   pred: npt.NDArray[np.intp], min_loop: float) -> bool:
+    """Whether the extreme ``node`` is the far side of a loop that a found path runs through
+    (``dist``, ``pred``: distances and predecessors towards the target set, the root and the
+    paths found before): two of its neighbours nearer the targets reach them by disjoint
+    paths, at target nodes at least ``min_loop`` apart (geodesic, Eq. 6).
+
+    A limb that touches the body closes a loop (arms folded, hands clasped in front of the
+    chest, a hand on the hip). The first path found runs through the loop's farthest point
+    and down one of its sides; the other side then hangs between two points of that path,
+    and its farthest point from them (the elbow) is an extreme of the next iteration, often
+    g or more from the paths: an end-effector of the iterated Dijkstra that ends no chain. A
+    real chain (a limb, a head) is one sub-band per band, so its neighbours' paths join at
+    once and reach the targets at one point."""
+    neighbours = np.flatnonzero(graph.dense_weights[node] > 0)
+    down = neighbours[dist[neighbours] < dist[node]]
+    paths = [path_to_sources(pred, int(n)) for n in down]  # a loop over neighbours only
+    for i, path in enumerate(paths):
+        for other in paths[i + 1:]:
+            if (not np.isin(path, other).any()
+                    and graph.dist[path[-1], other[-1]] >= min_loop):
+                return True
+    return False
 
 
 def _farthest_chain(graph: TopologyGraph, root: int, dist: npt.NDArray[np.float64],

@@ -116,6 +116,11 @@ class EndeffParams:
                              'the found paths (a chain, not one long edge of a broad surface).',
                              lo=1, hi=100)
     max_end_effectors: int = _p(12, 'Upper bound on end-effectors per entity.', lo=1, hi=100)
+    loop_far_sides: bool = _p(True, 'An extreme on the far side of a loop that a found path '
+                              'runs through (the elbow of folded arms or clasped hands: its '
+                              'two sides reach the found paths at points g or more apart) '
+                              'is no end-effector: not reported, no new track starts on it, '
+                              'a track already following it may keep it.')
     drop_cut_ends: bool = _p(True, 'Drop an end-effector whose sub-band reaches the image border '
                              '(within cut_margin_px) or the foreground box (within one voxel): '
                              'it is where the view or the box cuts the body, not an end.')

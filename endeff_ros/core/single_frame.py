@@ -39,6 +39,9 @@ class EntityEstimate:
     graph: TopologyGraph
     point_index: npt.NDArray[np.intp]
     root_node: int = 0
+    #: Extremes on the far side of a loop (``loop_far_sides``): no end-effectors, but a track
+    #: already following one may match it.
+    loop_sides: list[Candidate] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -155,6 +158,7 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
     timer.lap('graph')
 
     found = []  # (entity, node, path, protrusion) of every end-effector in the frame
+    sides: list[bool] = []  # per found extreme: on the far side of a loop
     for e, seed in enumerate(seeds):
         root_node = int(subband[seed])
         found += [(e, *f) for f in find_end_effectors(graph, root_node,
@@ -162,23 +166,27 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
                                                        chain_geodesic=params.chain_geodesic,
                                                        chain_subbands=params.chain_subbands,
                                                        chain_min_points=params.subband_min_points,
-                                                       max_count=params.max_end_effectors)]
+                                                       max_count=params.max_end_effectors,
+                                                       loop_sides=sides)]
+    if not params.loop_far_sides:
+        sides = [False] * len(found)
     dist_root = [graph.dist[subband[seeds[e]], path] for e, _, path, _ in found]
     positions, shifts, widths = _tip_positions(points, subband, graph, [f[2] for f in found],
                                                dist_root, params)
     candidates: list[list[Candidate]] = [[] for _ in seeds]
-    for (e, node, path, protrusion), position, shift, width in zip(found, positions, shifts,
-                                                                   widths):
+    loop_sides: list[list[Candidate]] = [[] for _ in seeds]
+    for (e, node, path, protrusion), side, position, shift, width in zip(
+            found, sides, positions, shifts, widths):
         if _broad_corner(protrusion, width, params):
             continue
         root = points[seeds[e]]
-        candidates[e].append(Candidate(
+        (loop_sides if side else candidates)[e].append(Candidate(
             position=position, node=node, geodesic=geodesic(graph, path),
             geodesic_approx=approximate_geodesic(position - shift, graph, path, root),
             path=graph.centroids[path], protrusion=protrusion, centre_shift=shift))
     entities = [EntityEstimate(entity=e, root=points[seed], candidates=candidates[e],
                                graph=graph, point_index=np.flatnonzero(entity == e),
-                               root_node=int(subband[seed]))
+                               root_node=int(subband[seed]), loop_sides=loop_sides[e])
                 for e, seed in enumerate(seeds)]
     timer.lap('extrema')
     unreachable = int(np.count_nonzero((entity >= 0) & (band == UNREACHED)))

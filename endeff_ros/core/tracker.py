@@ -374,8 +374,12 @@ class Tracker:
                 predicted: npt.NDArray[np.float64]) -> list[_TrackState]:
         p = self.params
         self._frame += 1
-        cands = [c for e in estimate.entities for c in e.candidates]
-        cand_entity = [e.entity for e in estimate.entities for _ in e.candidates]
+        # Loop far sides (``loop_far_sides``) are matched too, but start no track.
+        cands = [c for e in estimate.entities for c in e.candidates + e.loop_sides]
+        cand_entity = [e.entity for e in estimate.entities
+                       for _ in e.candidates + e.loop_sides]
+        loop_side = [k >= len(e.candidates) for e in estimate.entities
+                     for k in range(len(e.candidates) + len(e.loop_sides))]
         preds = self._rectify(estimate, predicted)
         sim, geo = self._similarity(estimate, preds, cands)
         rows, cols = (min_cost_assignment(-sim) if sim.size
@@ -432,7 +436,7 @@ class Tracker:
                     continue
                 self._take_prediction(track, pr, pred_geo, missed=True)
                 survivors.append(track)
-        new = [j for j in range(len(cands)) if j not in used_cands]
+        new = [j for j in range(len(cands)) if j not in used_cands and not loop_side[j]]
         ids = self._revived_ids([cands[j].end_centre for j in new])
         for j, track_id in zip(new, ids):
             cand = cands[j]
