@@ -387,12 +387,13 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
         if floor is not None:
             height = floor.heights(x, y, z)
             if known:
-                off_background = None if background is None else functools.partial(
-                    _off_background, background, z_image, valid, (x, y, z), keep, params)
                 near = np.flatnonzero(keep & (np.abs(height) < params.floor_distance))
                 n_inside = int(np.count_nonzero(keep))
-                moved = (_moved_floor(floor, (x, y, z), keep, params, off_background)
-                         if len(near) < params.floor_min_fraction * n_inside else None)
+                moved = None
+                if len(near) < params.floor_min_fraction * n_inside:
+                    off = None if background is None else functools.partial(
+                        _off_background, background, z_image, valid, (x, y, z), keep, params)
+                    moved = _moved_floor(floor, (x, y, z), keep, params, off)
                 if moved is not None:  # the camera moved (see _moved_floor)
                     floor = moved
                     height = floor.heights(x, y, z)

@@ -158,7 +158,8 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
     timer.lap('graph')
 
     found = []  # (entity, node, path, protrusion) of every end-effector in the frame
-    sides: list[bool] = []  # per found extreme: on the far side of a loop
+    # Per found extreme: on the far side of a loop (asked only with loop_far_sides).
+    sides: list[bool] | None = [] if params.loop_far_sides else None
     for e, seed in enumerate(seeds):
         root_node = int(subband[seed])
         found += [(e, *f) for f in find_end_effectors(graph, root_node,
@@ -168,15 +169,13 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
                                                        chain_min_points=params.subband_min_points,
                                                        max_count=params.max_end_effectors,
                                                        loop_sides=sides)]
-    if not params.loop_far_sides:
-        sides = [False] * len(found)
     dist_root = [graph.dist[subband[seeds[e]], path] for e, _, path, _ in found]
     positions, shifts, widths = _tip_positions(points, subband, graph, [f[2] for f in found],
                                                dist_root, params)
     candidates: list[list[Candidate]] = [[] for _ in seeds]
     loop_sides: list[list[Candidate]] = [[] for _ in seeds]
     for (e, node, path, protrusion), side, position, shift, width in zip(
-            found, sides, positions, shifts, widths):
+            found, sides or [False] * len(found), positions, shifts, widths):
         if _broad_corner(protrusion, width, params):
             continue
         root = points[seeds[e]]

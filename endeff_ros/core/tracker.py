@@ -375,11 +375,12 @@ class Tracker:
         p = self.params
         self._frame += 1
         # Loop far sides (``loop_far_sides``) are matched too, but start no track.
-        cands = [c for e in estimate.entities for c in e.candidates + e.loop_sides]
-        cand_entity = [e.entity for e in estimate.entities
-                       for _ in e.candidates + e.loop_sides]
-        loop_side = [k >= len(e.candidates) for e in estimate.entities
-                     for k in range(len(e.candidates) + len(e.loop_sides))]
+        listed = [(c, e.entity, side) for e in estimate.entities
+                  for side, group in ((False, e.candidates), (True, e.loop_sides))
+                  for c in group]
+        cands = [c for c, _, _ in listed]
+        cand_entity = [entity for _, entity, _ in listed]
+        loop_side = [side for _, _, side in listed]
         preds = self._rectify(estimate, predicted)
         sim, geo = self._similarity(estimate, preds, cands)
         rows, cols = (min_cost_assignment(-sim) if sim.size
