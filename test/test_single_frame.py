@@ -10,6 +10,7 @@ one (Hungarian matching on the Euclidean distance).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 
@@ -976,9 +977,14 @@ def test_the_elbow_of_a_closed_arm_is_no_end(arm):
 
 
 @functools.cache
+def short_person_pose(pose, scale):
+    """A person in ``pose`` ``scale`` times the 1.75 m model."""
+    return scenes.shoot(scenes.person(pose, model=PersonModel(PersonStyle(scale=scale))))
+
+
 def short_person(scale):
     """A T-pose person ``scale`` times the 1.75 m model (its head protrudes less)."""
-    return scenes.shoot(scenes.person('t_pose', model=PersonModel(PersonStyle(scale=scale))))
+    return short_person_pose('t_pose', scale)
 
 
 def test_t_pose_head_is_found_as_a_chain_below_g():
@@ -1005,6 +1011,51 @@ def test_t_pose_head_of_a_shorter_person():
     assert tip_errors(shot.gt[HEAD][None], est.positions())[0] < TIP_TOLERANCE
     higher = estimate_frame(shot.frame, EndeffParams(chain_geodesic=0.25))
     assert tip_errors(shot.gt[HEAD][None], higher.positions())[0] > 0.15
+
+
+def _two_limbs(long: float, short: float):
+    """A root with a limb of ``long`` m and one of ``short`` m on the other side (nodes every
+    0.05 m); returns the graph and the short limb's end node."""
+    steps = [round(long / 0.05), round(short / 0.05)]
+    centroids = [np.zeros(3)]
+    edges = []
+    for sign, n in zip((1.0, -1.0), steps):
+        prev = 0
+        for k in range(1, n + 1):
+            centroids.append(np.array([sign * 0.05 * k, 0.0, 0.0]))
+            edges.append((prev, len(centroids) - 1))
+            prev = len(centroids) - 1
+    return make_graph(centroids, edges), len(centroids) - 1
+
+
+@pytest.mark.parametrize('long, short, scale_length, found', [
+    (0.6, 0.25, 0.9, True),    # g shrinks to 0.3 * 0.6 / 0.9 = 0.2 m: the 0.25 m limb is an end
+    (0.6, 0.25, 0.0, False),   # off: g alone, as the paper
+    (0.9, 0.25, 0.9, False),   # an adult-sized entity keeps g
+    (0.6, 0.15, 0.9, False),   # below the shrunk g
+    (0.3, 0.15, 0.9, False),   # shrunk at most to scale_min (0.6): g 0.18 m, not 0.1 m
+])
+def test_relative_thresholds_shrink_g_for_a_small_entity(long, short, scale_length, found):
+    """g and the chain threshold shrink with the first end's geodesic distance below
+    scale_length, down to scale_min of their values."""
+    g, end = _two_limbs(long, short)
+    ends = find_end_effectors(g, 0, min_geodesic=0.3, max_count=12, scale_length=scale_length,
+                              scale_min=0.6)
+    assert (end in [node for node, _, _ in ends]) == found
+
+
+def test_a_small_childs_hand_is_found_with_relative_thresholds():
+    """A 1.05 m child (the 1.75 m model at 0.6), arms hanging: one hand ends a limb that
+    protrudes less than g = 0.3 m from the root and the other paths; with g relative to the
+    child's size it is found, with g in metres alone it is not; no end is added elsewhere."""
+    shot = short_person_pose('arms_down', 0.6)
+    params = EndeffParams(background=False)
+    relative = estimate_frame(shot.frame, params)
+    metres = estimate_frame(shot.frame, dataclasses.replace(params, scale_length=0.0))
+    hand = shot.gt[LEFT_HAND][None]
+    assert tip_errors(hand, relative.positions())[0] < TIP_TOLERANCE
+    assert tip_errors(hand, metres.positions())[0] > 0.15
+    assert len(relative.positions()) == len(metres.positions()) + 1
 
 
 def test_geodesics_eqs_6_and_7():

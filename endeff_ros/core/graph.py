@@ -191,7 +191,8 @@ def path_to_sources(pred: npt.NDArray[np.intp], node: int) -> npt.NDArray[np.int
 def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
                        max_count: int, chain_geodesic: float | None = None,
                        chain_subbands: int = 3, chain_min_points: int = 1,
-                       loop_sides: list[bool] | None = None,
+                       loop_sides: list[bool] | None = None, scale_length: float = 0.0,
+                       scale_min: float = 1.0,
                        ) -> list[tuple[int, npt.NDArray[np.intp], float]]:
     """Iterated Dijkstra with zero-weight edges along each found path (Baak et al.).
 
@@ -219,6 +220,15 @@ def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
 
     ``loop_sides``: a list that receives, per end-effector returned, whether it is the far
     side of a loop (:func:`_loop_far_side`); None: not asked.
+
+    Relative thresholds: once the first (farthest) end is found, its geodesic distance L
+    measures the entity; below ``scale_length`` g and the chain threshold shrink by
+    L / ``scale_length``, to ``scale_min`` of their values at least. Why: g in metres suits one
+    body size; a 1.2 m child's head lies 0.25 m from a root whose first end (a foot) lies
+    0.6 m away, and the arms' paths cross its shoulders 0.16 m below the head, so g = 0.3 m
+    and the chain rule miss it in every frame. The floor keeps a body cut by the view (the
+    upper body of a person close to the camera: a short first end for reasons other than
+    size) from finding ends on every bump. docs/design.md has the measurements.
     """
     pred_root = graph.pred[root]
     low = min_geodesic if chain_geodesic is None else min(chain_geodesic, min_geodesic)
@@ -236,6 +246,9 @@ def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
             if node < 0:
                 break
         found.append((node, path_to_sources(pred_root, node), float(dist[node])))
+        if len(found) == 1 and scale_length > 0:
+            shrink = min(1.0, max(scale_min, float(dist[node]) / scale_length))
+            min_geodesic, low = min_geodesic * shrink, low * shrink
         if loop_sides is not None:
             loop_sides.append(len(sources) > 1
                               and _loop_far_side(graph, node, dist, pred, min_geodesic))

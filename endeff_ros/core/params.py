@@ -115,6 +115,13 @@ class EndeffParams:
     chain_subbands: int = _p(3, 'Sub-bands (edges) an extreme below g needs on its path to '
                              'the found paths (a chain, not one long edge of a broad surface).',
                              lo=1, hi=100)
+    scale_length: float = _p(0.9, 'Relative thresholds: an entity whose first end-effector '
+                             'lies closer than this to the root (a child, a small robot) has '
+                             'g and chain_geodesic shrunk in the same proportion; 0 = off.',
+                             unit='m', lo=0.0, hi=10.0)
+    scale_min: float = _p(0.6, 'Relative thresholds: the least fraction of g and '
+                          'chain_geodesic they shrink to (a body cut by the view, a small '
+                          'piece of furniture).', lo=0.05, hi=1.0)
     max_end_effectors: int = _p(12, 'Upper bound on end-effectors per entity.', lo=1, hi=100)
     loop_far_sides: bool = _p(True, 'An extreme on the far side of a loop that a found path '
                               'runs through (the elbow of folded arms or clasped hands: its '

@@ -168,7 +168,9 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
                                                        chain_subbands=params.chain_subbands,
                                                        chain_min_points=params.subband_min_points,
                                                        max_count=params.max_end_effectors,
-                                                       loop_sides=sides)]
+                                                       loop_sides=sides,
+                                                       scale_length=params.scale_length,
+                                                       scale_min=params.scale_min)]
     dist_root = [graph.dist[subband[seeds[e]], path] for e, _, path, _ in found]
     positions, shifts, widths = _tip_positions(points, subband, graph, [f[2] for f in found],
                                                dist_root, params)
