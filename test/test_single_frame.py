@@ -794,27 +794,29 @@ def make_graph(centroids, edges):
                          weights.toarray(), dist, pred)
 
 
+def _limb(centroids, edges, start, direction, length, spacing=0.1):
+    """Append to ``centroids`` and ``edges`` a straight limb from node ``start`` along
+    ``direction``, ``length`` m long with a node every ``spacing`` m; returns its tip node."""
+    prev = start
+    direction = np.asarray(direction, float) / np.linalg.norm(direction)
+    base = centroids[start]
+    for step in range(1, int(round(length / spacing)) + 1):
+        centroids.append(base + spacing * step * direction)
+        edges.append((prev, len(centroids) - 1))
+        prev = len(centroids) - 1
+    return prev
+
+
 def _y_graph():
     """Root at the junction, arms of 0.7, 0.6 and 0.5 m (nodes every 0.1 m) and a 0.2 m twig
     off the middle of the longest arm. Returns the graph and the leaf node of each arm."""
     centroids = [np.zeros(3)]
     edges = []
     leaves = {}
-
-    def arm(start, direction, length, name):
-        prev = start
-        direction = np.asarray(direction, float) / np.linalg.norm(direction)
-        base = centroids[start]
-        for step in range(1, int(round(length / 0.1)) + 1):
-            centroids.append(base + 0.1 * step * direction)
-            edges.append((prev, len(centroids) - 1))
-            prev = len(centroids) - 1
-        leaves[name] = prev
-
     for name, length, angle in (('a', 0.7, 90), ('b', 0.6, 210), ('c', 0.5, 330)):
         rad = math.radians(angle)
-        arm(0, (math.cos(rad), math.sin(rad), 0), length, name)
-    arm(3, (1, 0, 0), 0.2, 'twig')  # node 3 is 0.3 m up arm a
+        leaves[name] = _limb(centroids, edges, 0, (math.cos(rad), math.sin(rad), 0), length)
+    leaves['twig'] = _limb(centroids, edges, 3, (1, 0, 0), 0.2)  # node 3: 0.3 m up arm a
     return make_graph(centroids, edges), leaves
 
 
@@ -1016,16 +1018,11 @@ def test_t_pose_head_of_a_shorter_person():
 def _two_limbs(long: float, short: float):
     """A root with a limb of ``long`` m and one of ``short`` m on the other side (nodes every
     0.05 m); returns the graph and the short limb's end node."""
-    steps = [round(long / 0.05), round(short / 0.05)]
     centroids = [np.zeros(3)]
     edges = []
-    for sign, n in zip((1.0, -1.0), steps):
-        prev = 0
-        for k in range(1, n + 1):
-            centroids.append(np.array([sign * 0.05 * k, 0.0, 0.0]))
-            edges.append((prev, len(centroids) - 1))
-            prev = len(centroids) - 1
-    return make_graph(centroids, edges), len(centroids) - 1
+    _limb(centroids, edges, 0, (1, 0, 0), long, spacing=0.05)
+    end = _limb(centroids, edges, 0, (-1, 0, 0), short, spacing=0.05)
+    return make_graph(centroids, edges), end
 
 
 @pytest.mark.parametrize('long, short, scale_length, found', [
