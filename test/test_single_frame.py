@@ -34,6 +34,7 @@ from endeff_ros.core.graph import (
     TopologyGraph,
     approximate_geodesic,
     build_graph,
+    distance_to_path,
     find_end_effectors,
     geodesic,
 )
@@ -1078,6 +1079,18 @@ def test_approximate_geodesic_uses_the_middle_node_by_count():
     path = np.array([3, 2, 1, 0])  # mid = path[2] = node 1
     e = np.array([0.3, 1.0, 0.0])
     assert approximate_geodesic(e, g, path, centroids[0]) == pytest.approx(1.0 + 0.3)
+
+
+def test_distance_to_path_is_to_the_nearest_segment():
+    """The distance from a point to a path given by its node positions (the polyline, not
+    its nodes): what case B asks of a candidate and a track's memorised path."""
+    path = np.array([[0.3, 1.0, 0.0], [0.3, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    assert distance_to_path(np.array([0.5, 0.5, 0.0]), path) == pytest.approx(0.2)
+    assert distance_to_path(np.array([0.15, -0.1, 0.0]), path) == pytest.approx(0.1)
+    assert distance_to_path(np.array([0.3, 1.2, 0.0]), path) == pytest.approx(0.2)  # beyond
+    assert distance_to_path(np.array([1.0, 0.0, 0.0]), path[:1]) == pytest.approx(
+        np.hypot(0.7, 1.0))
+    assert distance_to_path(np.zeros(3), np.zeros((0, 3))) == np.inf
 
 
 def test_candidates_carry_consistent_geodesics():

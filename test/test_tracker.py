@@ -342,6 +342,51 @@ def test_case_b_memory_wins_no_longer_than_twice_it_was_seen(seen):
     assert held == [True] * limit + [False] * 4
 
 
+def _swap_limb_ends(case_b_path_distance: float) -> tuple[int, list[Track]]:
+    """A star's limb 0 end tracked for 4 frames while the estimate leaves out limb 1's end;
+    then limb 0's end leaves the estimate and limb 1's comes in (the same depth image, so
+    limb 0's prediction stays at its end). ε_b is widened (``unrelated_ratio`` 3) so that the
+    two ends (0.53 m apart, farther through the ball) pair in case B. Returns limb 0's track id
+    and the tracks of the swapped frame."""
+    shot = star_limb_vanishes(1, 0)[0]
+    params = EndeffParams(unrelated_ratio=3.0, case_b_path_distance=case_b_path_distance)
+    est = estimate_frame(shot.frame, params)
+    ent = est.entities[0]
+
+    def nearest(limb: int) -> int:
+        tip = sc.star_tip(5, limb)
+        return int(np.argmin([np.linalg.norm(c.position - tip) for c in ent.candidates]))
+
+    def without(k: int) -> FrameEstimate:
+        return dataclasses.replace(est, entities=[dataclasses.replace(ent, candidates=[
+            c for i, c in enumerate(ent.candidates) if i != k])])
+
+    end0, end1 = nearest(0), nearest(1)
+    assert end0 != end1 and len(ent.candidates) == 5
+    tracker = Tracker(params)
+    for _ in range(4):
+        res = tracker.update(shot.frame, estimate=without(end1))
+    tid = min(res.tracks, key=lambda t: np.linalg.norm(t.position - sc.star_tip(5, 0))).id
+    return tid, tracker.update(shot.frame, estimate=without(end0)).tracks
+
+
+def test_case_b_leaves_another_limbs_end_alone():
+    """Case B is one end-effector replaced by a part of its own limb (Fig. 7b: the elbow of a
+    hand on the chest); an end on another limb is another end-effector. When limb 0's end
+    is no longer a candidate and limb 1's end appears, limb 0's track goes on predicted at
+    its end (case C) and limb 1's end starts a track of its own. Without the test
+    (``case_b_path_distance`` 0) the pair is case B: limb 1's end is dropped for the
+    memory, or takes limb 0's id (Fig. 7c: here it does), and no track of its own follows it."""
+    tip0, tip1 = sc.star_tip(5, 0), sc.star_tip(5, 1)
+    tid, tracks = _swap_limb_ends(0.2)
+    kept = next(t for t in tracks if t.id == tid)
+    assert kept.state == Track.PREDICTED and np.linalg.norm(kept.position - tip0) < TOL
+    new = [t for t in tracks if np.linalg.norm(t.position - tip1) < TOL]
+    assert len(new) == 1 and new[0].id != tid and new[0].state == Track.DETECTED
+    tid, tracks = _swap_limb_ends(0.0)
+    assert not any(np.linalg.norm(t.position - tip1) < TOL and t.id != tid for t in tracks)
+
+
 @pytest.mark.parametrize('keep', [2, 4])
 def test_unmatched_hand_predicted_at_most_t_frames(keep):
     """A hand pressed against the torso and kept there: the single-frame estimate never shows

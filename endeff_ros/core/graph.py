@@ -330,3 +330,18 @@ def approximate_geodesic_along(position: npt.NDArray[np.float64],
     a track kept from the frame it was last detected in."""
     mid = path_points[len(path_points) // 2]
     return float(np.linalg.norm(position - mid) + np.linalg.norm(mid - root))
+
+
+def distance_to_path(position: npt.NDArray[np.float64],
+                     path_points: npt.NDArray[np.float64]) -> float:
+    """Euclidean distance from ``position`` to the polyline through ``path_points`` (K, 3), a
+    path by its node positions; inf for an empty path."""
+    pts = np.asarray(path_points, dtype=np.float64).reshape(-1, 3)
+    if len(pts) == 0:
+        return float('inf')
+    if len(pts) == 1:
+        return float(np.linalg.norm(position - pts[0]))
+    start, step = pts[:-1], np.diff(pts, axis=0)
+    t = np.clip(((position - start) * step).sum(axis=1)
+                / np.maximum((step * step).sum(axis=1), 1e-12), 0.0, 1.0)
+    return float(np.linalg.norm(start + t[:, None] * step - position, axis=1).min())

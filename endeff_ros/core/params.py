@@ -155,6 +155,14 @@ class EndeffParams:
     unrelated_ratio: float = _p(1.0, 'Case B lower bound: ε_b is this factor over '
                                 '(1 + max(dist_G(e1), dist_G(e2))) as a similarity.',
                                 symbol='ε_b', lo=0.0, hi=10.0)
+    # A candidate off the track's limb is another end-effector, not this one replaced by a
+    # part of its limb (docs/design.md, "Case B stays on the limb").
+    case_b_path_distance: float = _p(0.2, 'Case B only for a candidate within this distance '
+                                     'of the path the track reached the root by when last '
+                                     'detected (its own limb: the elbow of a hand on the '
+                                     'chest); farther, the track goes on in case C and the '
+                                     'candidate starts its own track; 0 = off.', unit='m',
+                                     lo=0.0, hi=10.0)
     similarity_scale: float = _p(0.15, 'Similarity = 1 / (1 + geodesic / scale) between two '
                                  'candidates in the current graph.', unit='m', lo=0.001,
                                  hi=10.0)

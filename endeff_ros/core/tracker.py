@@ -50,7 +50,12 @@ from .background import BackgroundModel
 from .bands import UNREACHED
 from .cloud import FloorPlane
 from .flow import FlowEstimator, propagate_points
-from .graph import approximate_geodesic, approximate_geodesic_along, path_to_sources
+from .graph import (
+    approximate_geodesic,
+    approximate_geodesic_along,
+    distance_to_path,
+    path_to_sources,
+)
 from .nearest import nearest_point
 from .params import EndeffParams
 from .single_frame import FrameEstimate, estimate_frame
@@ -403,7 +408,8 @@ class Tracker:
                     case = 'A'
                 else:
                     eps_b_geo = p.unrelated_ratio * max(pred_geo, cand.geodesic_approx)
-                    case = 'B' if geo[i, j] < eps_b_geo else 'C'
+                    case = ('B' if geo[i, j] < eps_b_geo and self._on_limb(track, cand)
+                            else 'C')
             if case == 'A':
                 cand = cands[j]
                 used_cands.add(j)
@@ -445,6 +451,19 @@ class Tracker:
                 id=track_id, position=cand.end_centre, geodesic=cand.geodesic_approx,
                 entity=cand_entity[j], path=cand.path, centre_shift=cand.centre_shift))
         return self._drop_duplicates(survivors)
+
+    def _on_limb(self, track: _TrackState, cand: Candidate) -> bool:
+        """Whether ``cand`` may be case B for ``track``: it lies within
+        ``case_b_path_distance`` of the path by which the track's end reached the root when
+        last detected. Case B is one end-effector replaced by a part of its own limb while it
+        touches the body (Fig. 7b: the elbow of a hand on the chest, near the arm's path).
+        Within ε_b of a prediction there may also be another limb's end (a head 0.4-0.6 m
+        through the neck from a hand whose track lives on its prediction); without this
+        test that end was dropped for the memory, or took the hand's id (Fig. 7c).
+        docs/design.md, "Case B stays on the limb"."""
+        limit = self.params.case_b_path_distance
+        return (limit <= 0 or len(track.path) == 0
+                or distance_to_path(cand.end_centre, track.path) <= limit)
 
     def _revived_ids(self, positions: list[npt.NDArray[np.float64]]) -> list[int]:
         """Ids for new tracks at ``positions``. A track dropped within the last
