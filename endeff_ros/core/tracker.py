@@ -20,7 +20,10 @@ Per frame t+1:
 5. **Cases**: a matched pair with s > ε_a is *related* (case A); with ε_b < s <= ε_a it is an
    *unrelated* pair (case B), where ε_b is the similarity of the larger geodesic distance of the
    two to the root (times ``unrelated_ratio``): two real end-effectors are farther apart than
-   either is from the root, so they are not compared; everything else is *unmatched* (case C).
+   either is from the root, so they are not compared; and the candidate must lie on the
+   track's limb (within ``case_b_path_distance`` of the path by which the track's end reached
+   the root when last detected), for case B is an end replaced by a part of its own limb;
+   everything else is *unmatched* (case C).
 6. **Selection**: in case B the candidate with the longer approximate geodesic distance
    (Eq. 7, memorised by Eq. 8 for predictions) survives, a memorised one for at most twice as
    many consecutive frames as detections ever supported its track (the paper's warning that
