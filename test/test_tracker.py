@@ -301,6 +301,17 @@ def test_unmatched_limb_kept_no_longer_than_it_was_seen(seen):
     assert kept == want, r.table(tid, 0)
 
 
+def _nearest_candidate(entity, tip: np.ndarray) -> int:
+    """Index of ``entity``'s candidate nearest ``tip``."""
+    return int(np.argmin([np.linalg.norm(c.position - tip) for c in entity.candidates]))
+
+
+def _with_candidates(est: FrameEstimate, candidates: list[Candidate]) -> FrameEstimate:
+    """``est`` (one entity) with that entity's candidates replaced by ``candidates``."""
+    return dataclasses.replace(est, entities=[dataclasses.replace(est.entities[0],
+                                                                  candidates=candidates)])
+
+
 @pytest.mark.parametrize('seen', [3, 5])
 def test_case_b_memory_wins_no_longer_than_twice_it_was_seen(seen):
     """Case B keeps the memorised end-effector against a current candidate with a shorter
@@ -314,7 +325,7 @@ def test_case_b_memory_wins_no_longer_than_twice_it_was_seen(seen):
     est = estimate_frame(shot.frame, params)
     ent = est.entities[0]
     tip = sc.star_tip(5, 0)
-    k = int(np.argmin([np.linalg.norm(c.position - tip) for c in ent.candidates]))
+    k = _nearest_candidate(ent, tip)
     end, g = ent.candidates[k], ent.graph
     nodes = [int(np.argmin(np.linalg.norm(g.centroids - p, axis=1))) for p in end.path]
     depth = g.dist[nodes[0], nodes]
@@ -325,8 +336,7 @@ def test_case_b_memory_wins_no_longer_than_twice_it_was_seen(seen):
                                                            np.array(nodes[j:]), ent.root),
                       path=end.path[j:])
     assert inner.geodesic_approx < end.geodesic_approx  # premise: the memory is longer
-    moved = dataclasses.replace(est, entities=[dataclasses.replace(ent, candidates=[
-        inner if i == k else c for i, c in enumerate(ent.candidates)])])
+    moved = _with_candidates(est, [inner if i == k else c for i, c in enumerate(ent.candidates)])
     tracker = Tracker(params)
     for _ in range(seen):
         res = tracker.update(shot.frame, estimate=est)
@@ -353,15 +363,10 @@ def _swap_limb_ends(case_b_path_distance: float) -> tuple[int, list[Track]]:
     est = estimate_frame(shot.frame, params)
     ent = est.entities[0]
 
-    def nearest(limb: int) -> int:
-        tip = sc.star_tip(5, limb)
-        return int(np.argmin([np.linalg.norm(c.position - tip) for c in ent.candidates]))
-
     def without(k: int) -> FrameEstimate:
-        return dataclasses.replace(est, entities=[dataclasses.replace(ent, candidates=[
-            c for i, c in enumerate(ent.candidates) if i != k])])
+        return _with_candidates(est, [c for i, c in enumerate(ent.candidates) if i != k])
 
-    end0, end1 = nearest(0), nearest(1)
+    end0, end1 = (_nearest_candidate(ent, sc.star_tip(5, limb)) for limb in (0, 1))
     assert end0 != end1 and len(ent.candidates) == 5
     tracker = Tracker(params)
     for _ in range(4):
