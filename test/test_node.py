@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import threading
 import time
 
 import numpy as np
@@ -64,7 +65,7 @@ class FakeTracker:
 class Harness:
     """The node under test plus a tester node that feeds inputs and collects outputs."""
 
-    def __init__(self, overrides: dict | None = None) -> None:
+    def __init__(self, overrides: dict | None = None, tracker_factory: type = FakeTracker) -> None:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.parameter import Parameter
         from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -76,7 +77,7 @@ class Harness:
         overrides = overrides or {}
         self.ns = f'/t{next(_ns)}'
         params = [Parameter(k, value=v) for k, v in overrides.items()]
-        self.node = EndeffNode(tracker_factory=FakeTracker, namespace=self.ns,
+        self.node = EndeffNode(tracker_factory=tracker_factory, namespace=self.ns,
                                parameter_overrides=params)
         self.tracker: FakeTracker = self.node.tracker
         self.tester = rclpy.create_node('tester', namespace=self.ns)
@@ -130,8 +131,8 @@ class Harness:
 def harness(ros_context):
     made: list[Harness] = []
 
-    def make(**overrides) -> Harness:
-        made.append(Harness(overrides))
+    def make(tracker_factory: type = FakeTracker, **overrides) -> Harness:
+        made.append(Harness(overrides, tracker_factory))
         return made[-1]
 
     yield make
@@ -578,3 +579,83 @@ def test_no_early_estimate_while_the_tracker_wants_the_colour(ros_context):
         assert node.tracker.estimated == [2_000_000_000]
     finally:
         node.destroy_node()
+
+
+class FlowTracker(EarlyTracker):
+    """An early fake tracker that also computes its optical flow apart (as the real one
+    does): records the colour stamps it flowed and the flow each update received; its early
+    estimate waits (up to 10 s) for ``hold`` to be set, so that a test can deliver the colour
+    image while the worker is busy with the depth image."""
+
+    estimate_wants_color = False
+
+    def __init__(self, params: EndeffParams) -> None:
+        super().__init__(params)
+        self.flowed: list[tuple[int, int]] = []  # (image sum, width): which image, which info
+        self.flows_used: list[object] = []
+        self.hold = threading.Event()
+        self.hold.set()
+        self.estimating = threading.Event()
+
+    def flow(self, color: np.ndarray, intrinsics) -> object:
+        self.flowed.append((int(color.sum()), intrinsics.width))
+        return ('flow', len(self.flowed))
+
+    def estimate(self, frame: RGBDFrame) -> FrameEstimate:
+        self.estimating.set()
+        self.hold.wait(10.0)
+        self.estimated.append(frame.stamp_ns)
+        return FakeTracker.update(self, frame).estimate
+
+    def update(self, frame: RGBDFrame, estimate: FrameEstimate | None = None,
+               flow: object = None) -> TrackerResult:
+        self.flows_used.append(flow)
+        return super().update(frame)
+
+
+def _depth(stamp: int) -> object:
+    mm = np.full((H, W), 3800, np.uint16)
+    mm[5, 7] = 1500
+    return image_msg(mm, '16UC1', stamp, FRAME_ID)
+
+
+def _colour(stamp: int, value: int) -> object:
+    return image_msg(np.full((H, W, 3), value, np.uint8), 'rgb8', stamp, 'color_frame')
+
+
+def test_a_colour_image_before_its_depth_gets_its_flow_early(harness):
+    """A colour image that arrives first has its optical flow computed by the worker while
+    the depth image is awaited, and the set's update receives exactly that flow."""
+    h = harness(tracker_factory=FlowTracker)
+    stamp = 20_000_000_000
+    h.pub['info'].publish(info_msg(stamp, FRAME_ID, W, H))
+    assert spin_until(h.executor, lambda: h.node.stats.received['camera_info'] == 1)
+    h.pub['color'].publish(_colour(stamp + 3_000_000, 7))
+    assert spin_until(h.executor, lambda: bool(h.tracker.flowed))
+    h.pub['depth'].publish(_depth(stamp))
+    assert h.wait_clouds(1)
+    assert h.tracker.flowed == [(7 * H * W * 3, W)]
+    assert h.tracker.flows_used == [('flow', 1)]
+    assert h.node.stats.prepared_flow == 1 and h.node.stats.flow_alongside == 0
+
+
+def test_a_colour_image_during_its_depths_estimate_gets_its_flow_alongside(harness):
+    """A colour image that arrives while the worker runs the early Sections 3-4 of its depth
+    partner has its flow computed at once in the subscription callback (on another core);
+    the set uses both early results."""
+    h = harness(tracker_factory=FlowTracker)
+    stamp = 21_000_000_000
+    h.pub['info'].publish(info_msg(stamp, FRAME_ID, W, H))
+    assert spin_until(h.executor, lambda: h.node.stats.received['camera_info'] == 1)
+    h.tracker.hold.clear()
+    h.pub['depth'].publish(_depth(stamp))
+    assert spin_until(h.executor, h.tracker.estimating.is_set)
+    h.pub['color'].publish(_colour(stamp + 3_000_000, 9))
+    assert spin_until(h.executor, lambda: bool(h.tracker.flowed))
+    assert h.tracker.estimated == []  # the estimate was still waiting: flow alongside it
+    h.tracker.hold.set()
+    assert h.wait_clouds(1)
+    assert h.tracker.estimated == [stamp]
+    assert h.tracker.flows_used == [('flow', 1)]
+    assert h.node.stats.flow_alongside == 1
+    assert h.node.stats.prepared == 1 and h.node.stats.prepared_flow == 1
