@@ -62,6 +62,18 @@ class FakeTracker:
         return TrackerResult(frame.stamp_ns, frame.frame_id, tracks, estimate)
 
 
+def _depth_image(stamp_ns: int, depth_m: float = 1.5, frame_id: str = FRAME_ID) -> object:
+    """A 16UC1 depth image: background at 3.8 m, one pixel at ``depth_m`` (FakeTracker's end)."""
+    mm = np.full((H, W), 3800, np.uint16)
+    mm[5, 7] = round(depth_m * 1000)
+    return image_msg(mm, '16UC1', stamp_ns, frame_id)
+
+
+def _colour_image(stamp_ns: int, value: int = 90) -> object:
+    """A uniform rgb8 colour image stamped ``stamp_ns``."""
+    return image_msg(np.full((H, W, 3), value, np.uint8), 'rgb8', stamp_ns, 'color_frame')
+
+
 class Harness:
     """The node under test plus a tester node that feeds inputs and collects outputs."""
 
@@ -109,13 +121,9 @@ class Harness:
             assert spin_until(self.executor,
                               lambda: self.node.stats.received['camera_info'] > count)
         if color:
-            self.pub['color'].publish(color_msg or image_msg(
-                np.full((H, W, 3), 90, np.uint8), 'rgb8', stamp_ns + 3_000_000, 'color_frame'))
-        if depth_msg is None:
-            mm = np.full((H, W), 3800, np.uint16)
-            mm[5, 7] = round(depth_m * 1000)
-            depth_msg = image_msg(mm, '16UC1', stamp_ns, FRAME_ID)
-        self.pub['depth'].publish(depth_msg)
+            self.pub['color'].publish(color_msg or _colour_image(stamp_ns + 3_000_000))
+        self.pub['depth'].publish(_depth_image(stamp_ns, depth_m) if depth_msg is None
+                                  else depth_msg)
 
     def wait_clouds(self, n: int) -> bool:
         return spin_until(self.executor, lambda: len(self.clouds) >= n and
@@ -537,10 +545,8 @@ def test_empty_frame_id_is_warned_about(harness):
     count = h.node.stats.received['camera_info']
     h.pub['info'].publish(info_msg(16_000_000_000, '', W, H))
     assert spin_until(h.executor, lambda: h.node.stats.received['camera_info'] > count)
-    mm = np.full((H, W), 3800, np.uint16)
-    mm[5, 7] = 1500
     h.pub['color'].publish(image_msg(np.zeros((H, W, 3), np.uint8), 'rgb8', 16_000_000_000, ''))
-    h.pub['depth'].publish(image_msg(mm, '16UC1', 16_000_000_000, ''))
+    h.pub['depth'].publish(_depth_image(16_000_000_000, frame_id=''))
     assert h.wait_clouds(1)
     assert h.node.stats.warnings.get('empty_frame_id') == 1 and h.clouds[0].header.frame_id == ''
 
@@ -556,7 +562,7 @@ class EarlyTracker(FakeTracker):
 
     def estimate(self, frame: RGBDFrame) -> FrameEstimate:
         self.estimated.append(frame.stamp_ns)
-        return self.update(frame).estimate
+        return FakeTracker.update(self, frame).estimate  # not an update the node made
 
 
 def test_no_early_estimate_while_the_tracker_wants_the_colour(ros_context):
@@ -583,9 +589,10 @@ def test_no_early_estimate_while_the_tracker_wants_the_colour(ros_context):
 
 class FlowTracker(EarlyTracker):
     """An early fake tracker that also computes its optical flow apart (as the real one
-    does): records the colour stamps it flowed and the flow each update received; its early
-    estimate waits (up to 10 s) for ``hold`` to be set, so that a test can deliver the colour
-    image while the worker is busy with the depth image."""
+    does): records each image it flowed (its pixel sum and the camera info's width) and the
+    flow each update received; its early estimate waits (up to 10 s) for ``hold`` to be set,
+    so that a test can deliver the colour image while the worker is busy with the depth
+    image."""
 
     estimate_wants_color = False
 
@@ -604,23 +611,12 @@ class FlowTracker(EarlyTracker):
     def estimate(self, frame: RGBDFrame) -> FrameEstimate:
         self.estimating.set()
         self.hold.wait(10.0)
-        self.estimated.append(frame.stamp_ns)
-        return FakeTracker.update(self, frame).estimate
+        return super().estimate(frame)
 
     def update(self, frame: RGBDFrame, estimate: FrameEstimate | None = None,
                flow: object = None) -> TrackerResult:
         self.flows_used.append(flow)
         return super().update(frame)
-
-
-def _depth(stamp: int) -> object:
-    mm = np.full((H, W), 3800, np.uint16)
-    mm[5, 7] = 1500
-    return image_msg(mm, '16UC1', stamp, FRAME_ID)
-
-
-def _colour(stamp: int, value: int) -> object:
-    return image_msg(np.full((H, W, 3), value, np.uint8), 'rgb8', stamp, 'color_frame')
 
 
 def test_a_colour_image_before_its_depth_gets_its_flow_early(harness):
@@ -630,9 +626,9 @@ def test_a_colour_image_before_its_depth_gets_its_flow_early(harness):
     stamp = 20_000_000_000
     h.pub['info'].publish(info_msg(stamp, FRAME_ID, W, H))
     assert spin_until(h.executor, lambda: h.node.stats.received['camera_info'] == 1)
-    h.pub['color'].publish(_colour(stamp + 3_000_000, 7))
+    h.pub['color'].publish(_colour_image(stamp + 3_000_000, 7))
     assert spin_until(h.executor, lambda: bool(h.tracker.flowed))
-    h.pub['depth'].publish(_depth(stamp))
+    h.pub['depth'].publish(_depth_image(stamp))
     assert h.wait_clouds(1)
     assert h.tracker.flowed == [(7 * H * W * 3, W)]
     assert h.tracker.flows_used == [('flow', 1)]
@@ -648,9 +644,9 @@ def test_a_colour_image_during_its_depths_estimate_gets_its_flow_alongside(harne
     h.pub['info'].publish(info_msg(stamp, FRAME_ID, W, H))
     assert spin_until(h.executor, lambda: h.node.stats.received['camera_info'] == 1)
     h.tracker.hold.clear()
-    h.pub['depth'].publish(_depth(stamp))
+    h.pub['depth'].publish(_depth_image(stamp))
     assert spin_until(h.executor, h.tracker.estimating.is_set)
-    h.pub['color'].publish(_colour(stamp + 3_000_000, 9))
+    h.pub['color'].publish(_colour_image(stamp + 3_000_000, 9))
     assert spin_until(h.executor, lambda: bool(h.tracker.flowed))
     assert h.tracker.estimated == []  # the estimate was still waiting: flow alongside it
     h.tracker.hold.set()
