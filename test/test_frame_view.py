@@ -73,4 +73,6 @@ def test_main_writes_the_picture_and_refuses_a_missing_frame(room_bag, tmp_path,
     with pytest.raises(SystemExit) as exc:
         frame_view.main([str(bag), '--frame', '100000', '--out', str(tmp_path / 'x.png')])
     assert exc.value.code == 1
-    assert 'has no frame 100000' in capsys.readouterr().err
+    with frame_view.BagReader(bag) as reader:
+        n = sum(1 for _ in reader.frames())
+    assert f'has no frame 100000 (frames 0-{n - 1})' in capsys.readouterr().err

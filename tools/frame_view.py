@@ -51,8 +51,10 @@ def run_to_frame(bag: Path, frame: int, params: EndeffParams | None = None,
     Frames the estimator refuses (:class:`InputError`) are skipped, as ``endeff eval`` does;
     ``frame`` itself must be usable. Raises ``IndexError`` when the bag is shorter."""
     tracker = Tracker(params or EndeffParams())
+    count = 0
     with BagReader(bag) as reader:
         for i, (f, gt) in enumerate(reader.frames()):
+            count = i + 1
             if i == frame:
                 result = tracker.update(f)
                 truth = np.zeros((0, 3)) if gt is None else np.asarray(gt)[:, :3]
@@ -61,7 +63,7 @@ def run_to_frame(bag: Path, frame: int, params: EndeffParams | None = None,
                 tracker.update(f)
             except InputError:
                 continue
-    msg = f'{bag} has no frame {frame}'
+    msg = f'{bag} has no frame {frame} (frames 0-{count - 1})'
     raise IndexError(msg)
 
 
