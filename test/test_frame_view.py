@@ -51,8 +51,8 @@ def test_draws_ground_truth_candidates_and_sub_bands(viewed):
 
 
 def test_describe_measures_each_ground_truth_point(viewed):
-    _, truth, result = viewed
-    d = frame_view.describe(truth, result)
+    frame, truth, result = viewed
+    d = frame_view.describe(frame, truth, result)
     assert len(d['ground_truth']) == len(truth)
     tracks = np.array([t.position for t in result.tracks])
     for row, g in zip(d['ground_truth'], truth):
@@ -76,3 +76,32 @@ def test_main_writes_the_picture_and_refuses_a_missing_frame(room_bag, tmp_path,
     with frame_view.BagReader(bag) as reader:
         n = sum(1 for _ in reader.frames())
     assert f'has no frame 100000 (frames 0-{n - 1})' in capsys.readouterr().err
+
+
+def test_cut_sub_bands_are_marked(viewed):
+    """Sub-bands the image border cuts are drawn white and flagged in the summary. The
+    intrinsics are narrowed to the left half of the image, so that the body is cut."""
+    import dataclasses
+
+    frame, truth, result = viewed
+    est = result.estimate
+    u = frame.intrinsics.project(est.points)[:, 0]
+    half = int(np.median(u))
+    narrow = dataclasses.replace(
+        frame, depth=frame.depth[:, :half].copy(),
+        color=None if frame.color is None else frame.color[:, :half].copy(),
+        intrinsics=dataclasses.replace(frame.intrinsics, width=half))
+    cut = frame_view.cut_nodes(est.points, est.subband, narrow.intrinsics,
+                               frame_view.EndeffParams())
+    assert cut.size > 0
+    img = frame_view.draw(narrow, truth[:0], result)
+    on_cut = np.isin(est.subband, cut)
+    uv = np.round(narrow.intrinsics.project(est.points)).astype(int)
+    white = [tuple(img[v, u]) == frame_view.CUT_BGR for u, v in uv[on_cut]
+             if 0 <= u < half and 0 <= v < frame.depth.shape[0]]
+    assert white and np.mean(white) > 0.5
+    d = frame_view.describe(narrow, truth, result)
+    rows = [row for row in d['ground_truth'] if 'subband' in row]
+    assert rows
+    for row in rows:
+        assert row['cut'] == bool(np.isin(row['subband'], cut))

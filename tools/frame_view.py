@@ -4,7 +4,9 @@ The tracker runs over the bag from its first frame (so its static background, fl
 tracks are those of ``endeff eval``) up to ``--frame``; that frame is drawn over its depth
 image (near = bright):
 
-- the foreground points, coloured by sub-band (Section 4.1; points no band reached: grey);
+- the foreground points, coloured by sub-band (Section 4.1; points no band reached: grey;
+  sub-bands cut by the image border or the foreground box, whose extremes are dropped as no
+  ends (``drop_cut_ends``): white);
 - each candidate's geodesic path to its entity's root (Section 4.2), a white line, and the
   candidate (the single-frame estimator's end-effector) as a red ring;
 - the tracker's published end-effectors with their ids (:func:`draw_tracks`: filled when
@@ -12,7 +14,8 @@ image (near = bright):
 - the ground truth, green crosses.
 
 Printed (JSON): per ground-truth point its distance to the nearest candidate and track, and
-the sub-band, band and entity of the foreground point nearest to it; per candidate its
+the sub-band, band and entity of the foreground point nearest to it, and whether that
+sub-band is cut; per candidate its
 position, sub-band (graph node) and protrusion (its geodesic distance to the root and the
 earlier paths, compared with g).
 
@@ -34,6 +37,7 @@ from endeff_ros.cli_common import load_params_option, print_json
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.graph import path_to_sources
 from endeff_ros.core.params import EndeffParams
+from endeff_ros.core.single_frame import cut_nodes
 from endeff_ros.core.tracker import Tracker, TrackerResult
 from endeff_ros.core.types import Intrinsics, RGBDFrame
 from endeff_ros.ros.convert import depth_to_rgb, draw_tracks
@@ -42,6 +46,7 @@ GROUND_TRUTH_BGR = (0, 255, 0)
 CANDIDATE_BGR = (0, 0, 255)
 PATH_BGR = (255, 255, 255)
 UNBANDED_BGR = (90, 90, 90)
+CUT_BGR = (255, 255, 255)
 
 
 def run_to_frame(bag: Path, frame: int, params: EndeffParams | None = None,
@@ -71,8 +76,15 @@ def _pixels(intrinsics: Intrinsics, points: npt.NDArray[np.float64]) -> npt.NDAr
     return np.round(intrinsics.project(points)).astype(np.int32).reshape(-1, 2)
 
 
-def draw(frame: RGBDFrame, truth: npt.NDArray[np.float64],
-         result: TrackerResult) -> npt.NDArray[np.uint8]:
+def _cut(frame: RGBDFrame, result: TrackerResult,
+         params: EndeffParams | None) -> npt.NDArray[np.intp]:
+    """The frame's cut sub-bands (:func:`cut_nodes`)."""
+    est = result.estimate
+    return cut_nodes(est.points, est.subband, frame.intrinsics, params or EndeffParams())
+
+
+def draw(frame: RGBDFrame, truth: npt.NDArray[np.float64], result: TrackerResult,
+         params: EndeffParams | None = None) -> npt.NDArray[np.uint8]:
     """(H, W, 3) BGR picture of ``result``'s frame (see the module docstring)."""
     k = frame.intrinsics
     est = result.estimate
@@ -80,8 +92,10 @@ def draw(frame: RGBDFrame, truth: npt.NDArray[np.float64],
     if len(est.points):
         n = int(est.subband.max()) + 1 if est.subband.size else 0
         colours = np.random.default_rng(0).integers(80, 256, (max(n, 1), 3))
-        for (u, v), s in zip(_pixels(k, est.points), est.subband):
-            bgr = UNBANDED_BGR if s < 0 else tuple(int(c) for c in colours[s])
+        cut = np.isin(est.subband, _cut(frame, result, params))
+        for (u, v), s, c in zip(_pixels(k, est.points), est.subband, cut):
+            bgr = (UNBANDED_BGR if s < 0 else CUT_BGR if c
+                   else tuple(int(x) for x in colours[s]))
             cv2.circle(img, (int(u), int(v)), 2, bgr, -1)
     graph = est.graph
     for entity in est.entities:
@@ -99,9 +113,11 @@ def draw(frame: RGBDFrame, truth: npt.NDArray[np.float64],
     return img
 
 
-def describe(truth: npt.NDArray[np.float64], result: TrackerResult) -> dict[str, Any]:
+def describe(frame: RGBDFrame, truth: npt.NDArray[np.float64], result: TrackerResult,
+             params: EndeffParams | None = None) -> dict[str, Any]:
     """The JSON summary printed by :func:`main` (see the module docstring)."""
     est = result.estimate
+    cut = _cut(frame, result, params) if len(est.points) else np.zeros(0, np.intp)
     cands = [c for e in est.entities for c in e.candidates]
     cand_pos = np.array([c.position for c in cands]).reshape(-1, 3)
     track_pos = np.array([t.position for t in result.tracks]).reshape(-1, 3)
@@ -118,7 +134,7 @@ def describe(truth: npt.NDArray[np.float64], result: TrackerResult) -> dict[str,
             i = int(np.argmin(np.linalg.norm(est.points - g, axis=1)))
             row.update(nearest_foreground_m=float(np.linalg.norm(est.points[i] - g)),
                        subband=int(est.subband[i]), band=int(est.band[i]),
-                       entity=int(est.entity[i]))
+                       entity=int(est.entity[i]), cut=bool(np.isin(est.subband[i], cut)))
         rows.append(row)
     return {'ground_truth': rows,
             'candidates': [{'position': np.round(c.position, 3).tolist(), 'subband': c.node,
@@ -139,9 +155,9 @@ def main(argv: list[str] | None = None) -> int:
         frame, truth, result = run_to_frame(args.bag, args.frame, params)
     except (IndexError, InputError) as exc:
         parser.exit(1, f'frame_view: {exc}\n')
-    cv2.imwrite(str(args.out), draw(frame, truth, result))
+    cv2.imwrite(str(args.out), draw(frame, truth, result, params))
     print_json({'bag': str(args.bag), 'frame': args.frame, 'out': str(args.out),
-                **describe(truth, result)})
+                **describe(frame, truth, result, params)})
     return 0
 
 
