@@ -15,9 +15,8 @@ image (near = bright):
 
 Printed (JSON): per ground-truth point its distance to the nearest candidate and track, and
 the sub-band, band and entity of the foreground point nearest to it, and whether that
-sub-band is cut; per candidate its
-position, sub-band (graph node) and protrusion (its geodesic distance to the root and the
-earlier paths, compared with g).
+sub-band is cut; per candidate its position, sub-band (graph node) and protrusion (its
+geodesic distance to the root and the earlier paths, compared with g).
 
     python -m tools.frame_view BAG --frame N [--params YAML] [--out PNG]
 """
@@ -68,7 +67,7 @@ def run_to_frame(bag: Path, frame: int, params: EndeffParams | None = None,
                 tracker.update(f)
             except InputError:
                 continue
-    msg = f'{bag} has no frame {frame} (frames 0-{count - 1})'
+    msg = f'{bag} has no frame {frame} (it has {count} frames)'
     raise IndexError(msg)
 
 
