@@ -1135,3 +1135,75 @@ def test_an_end_cut_by_the_image_border_is_no_end_effector():
     assert np.linalg.norm(tips[inside] - dropped[0], axis=1).min() > 0.15
     rows, cols, dist = match(tips[inside], kept)
     assert len(rows) == 4 and np.all(dist < 0.05), dist
+
+
+def _patch(centre, size=0.2, spacing=0.03, tilt_deg=0.0):
+    """A square grid of points facing the camera (z), turned ``tilt_deg`` about y."""
+    g = np.arange(-size / 2, size / 2 + 1e-9, spacing)
+    u, v = np.meshgrid(g, g)
+    t = np.deg2rad(tilt_deg)
+    pts = np.stack([u.ravel() * np.cos(t), v.ravel(), u.ravel() * np.sin(t)], 1)
+    return pts + np.asarray(centre)
+
+
+def test_steep_steps_cut_a_surface_in_front_of_another():
+    """A hand 5 cm in front of the chest: every neighbour pair across the step is dropped,
+    every pair within either surface kept; off (ratio 0) nothing is dropped."""
+    chest = _patch((0.0, 0.0, 2.0), size=0.4)
+    hand = _patch((0.0, 0.0, 1.95), size=0.1)
+    cloud = np.concatenate([chest, hand])
+    on_hand = np.r_[np.zeros(len(chest), bool), np.ones(len(hand), bool)]
+    full = Neighbours.build(cloud, 0.08)
+    across = on_hand[full.i] != on_hand[full.j]
+    assert across.any()
+    cut = full.without_steps(cloud, 3.0, 0.04)
+    kept = {(int(a), int(b)) for a, b in zip(cut.i, cut.j)}
+    pairs = list(zip(full.i.tolist(), full.j.tolist()))
+    # Pairs across the step that are more behind each other than beside each other go.
+    for (a, b), x in zip(pairs, across):
+        rel = cloud[b] - cloud[a]
+        lateral = np.hypot(rel[0], rel[1])
+        if x and abs(rel[2]) > 3.0 * lateral:
+            assert (a, b) not in kept
+        if not x:
+            assert (a, b) in kept
+    assert len(cut.i) < len(full.i)
+    off = full.without_steps(cloud, 0.0, 0.04)
+    assert len(off.i) == len(full.i)
+
+
+@pytest.mark.parametrize('tilt', [0.0, 45.0, 65.0])
+def test_steep_steps_keep_a_surface_seen_obliquely(tilt):
+    """A single surface turned up to 65 degrees from head-on (neighbours up to tan 65 = 2.1
+    times farther apart along the ray than across it) keeps all its pairs at ratio 3."""
+    plane = _patch((0.0, 0.0, 2.0), size=0.4, tilt_deg=tilt)
+    full = Neighbours.build(plane, 0.08)
+    assert len(full.without_steps(plane, 3.0, 0.04).i) == len(full.i)
+
+
+def test_estimator_cuts_steep_steps_with_its_parameters(monkeypatch):
+    """``estimate_points`` hands ``steep_step_ratio`` and ``steep_step_min`` to the cut: the
+    pairs straight through a hand 6 cm in front of the chest are gone from what it uses."""
+    chest = _patch((0.0, 0.0, 2.0), size=0.6)
+    hand = _patch((0.0, 0.06, 1.94), size=0.12)
+    cloud = np.concatenate([chest, hand])
+    on_hand = np.r_[np.zeros(len(chest), bool), np.ones(len(hand), bool)]
+    seen = []
+    original = Neighbours.without_steps
+
+    def spy(self, points, ratio, min_step):
+        out = original(self, points, ratio, min_step)
+        seen.append((ratio, min_step, out))
+        return out
+
+    monkeypatch.setattr(Neighbours, 'without_steps', spy)
+    params = dataclasses.replace(EndeffParams(), steep_step_ratio=3.0, steep_step_min=0.05,
+                                 min_entity_points=10)
+    estimate_points(cloud, params)
+    (ratio, min_step, cut), = seen
+    assert (ratio, min_step) == (3.0, 0.05)
+    full = Neighbours.build(cloud, 0.08)
+    joined_before = np.count_nonzero(on_hand[full.i] != on_hand[full.j])
+    joined_after = np.count_nonzero(on_hand[cut.i] != on_hand[cut.j])
+    assert 0 < joined_after < joined_before
+    assert len(cut.i) == len(full.i) - (joined_before - joined_after)

@@ -93,6 +93,27 @@ class Neighbours:
                    d: npt.NDArray[np.float64]) -> Neighbours:
         return cls(n, i, j, d, *symmetric_csr(n, i, j, d))
 
+    def without_steps(self, points: npt.NDArray[np.float64], ratio: float,
+                      min_step: float) -> Neighbours:
+        """The pairs that are not one behind the other: a pair whose separation along the
+        viewing ray (through its midpoint) exceeds both ``min_step`` and ``ratio`` times its
+        separation across the ray is dropped. Such a pair joins two surfaces that overlap in
+        the image, a hand or forearm lying in front of the chest and the chest behind it,
+        which the radius graph (δ_L) otherwise makes one surface, so the band expansion
+        passes from the chest straight into the hand and the hand is no extreme of the graph.
+        A surface seen at incidence θ has neighbours with along / across = tan θ, so a ratio
+        of 3 keeps every surface seen within about 72 degrees of head-on (sensors return few
+        readings beyond 80). ``ratio`` 0 keeps every pair."""
+        if ratio <= 0 or self.i.size == 0:
+            return self
+        rel = points[self.j] - points[self.i]
+        mid = 0.5 * (points[self.i] + points[self.j])
+        ray = mid / np.maximum(np.linalg.norm(mid, axis=1, keepdims=True), 1e-9)
+        along = np.abs(np.einsum('ij,ij->i', rel, ray))
+        across = np.sqrt(np.maximum(self.d ** 2 - along ** 2, 0.0))
+        keep = (along <= min_step) | (along <= ratio * across)
+        return Neighbours.from_pairs(self.n, self.i[keep], self.j[keep], self.d[keep])
+
     def within(self, radius: float) -> Neighbours:
         """The pairs closer than ``radius`` (a smaller radius than the one built with)."""
         keep = self.d < radius
