@@ -1147,8 +1147,9 @@ def _patch(centre, size=0.2, spacing=0.03, tilt_deg=0.0):
 
 
 def test_steep_steps_cut_a_surface_in_front_of_another():
-    """A hand 5 cm in front of the chest: every neighbour pair across the step is dropped,
-    every pair within either surface kept; off (ratio 0) nothing is dropped."""
+    """A hand 5 cm in front of the chest: every neighbour pair across the step that lies
+    more than 3 times farther apart along the ray than across it is dropped, every pair
+    within either surface kept; off (ratio 0) nothing is dropped."""
     chest = _patch((0.0, 0.0, 2.0), size=0.4)
     hand = _patch((0.0, 0.0, 1.95), size=0.1)
     cloud = np.concatenate([chest, hand])

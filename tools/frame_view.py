@@ -35,6 +35,7 @@ from endeff_ros.bag.reader import BagReader
 from endeff_ros.cli_common import load_params_option, print_json
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.graph import path_to_sources
+from endeff_ros.core.nearest import nearest_point
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.single_frame import cut_nodes
 from endeff_ros.core.tracker import Tracker, TrackerResult
@@ -121,20 +122,21 @@ def describe(frame: RGBDFrame, truth: npt.NDArray[np.float64], result: TrackerRe
     cand_pos = np.array([c.position for c in cands]).reshape(-1, 3)
     track_pos = np.array([t.position for t in result.tracks]).reshape(-1, 3)
 
-    def nearest(points: npt.NDArray[np.float64], q: npt.NDArray[np.float64]) -> float | None:
-        return float(np.linalg.norm(points - q, axis=1).min()) if len(points) else None
+    def nearest(points: npt.NDArray[np.float64]) -> list[float | None]:
+        if not len(points):
+            return [None] * len(truth)
+        return nearest_point(points, truth)[0].tolist()
 
     rows = []
-    for g in truth:
-        row: dict[str, Any] = {'position': np.round(g, 3).tolist(),
-                               'nearest_candidate_m': nearest(cand_pos, g),
-                               'nearest_track_m': nearest(track_pos, g)}
-        if len(est.points):
-            i = int(np.argmin(np.linalg.norm(est.points - g, axis=1)))
-            row.update(nearest_foreground_m=float(np.linalg.norm(est.points[i] - g)),
-                       subband=int(est.subband[i]), band=int(est.band[i]),
-                       entity=int(est.entity[i]), cut=bool(np.isin(est.subband[i], cut)))
-        rows.append(row)
+    for g, d_cand, d_track in zip(truth, nearest(cand_pos), nearest(track_pos)):
+        rows.append({'position': np.round(g, 3).tolist(), 'nearest_candidate_m': d_cand,
+                     'nearest_track_m': d_track})
+    if len(est.points) and len(truth):
+        d_fg, index = nearest_point(est.points, truth)
+        for row, d, i in zip(rows, d_fg, index):
+            row.update(nearest_foreground_m=float(d), subband=int(est.subband[i]),
+                       band=int(est.band[i]), entity=int(est.entity[i]),
+                       cut=bool(np.isin(est.subband[i], cut)))
     return {'ground_truth': rows,
             'candidates': [{'position': np.round(c.position, 3).tolist(), 'subband': c.node,
                             'protrusion_m': round(c.protrusion, 3)} for c in cands],
