@@ -21,6 +21,7 @@ from scipy import sparse
 from scipy.sparse import csgraph
 from scipy.spatial.transform import Rotation
 
+from endeff_ros.core import bands
 from endeff_ros.core.assignment import min_cost_assignment
 from endeff_ros.core.bands import (
     UNREACHED,
@@ -1183,28 +1184,36 @@ def test_steep_steps_keep_a_surface_seen_obliquely(tilt):
 
 
 def test_estimator_cuts_steep_steps_with_its_parameters(monkeypatch):
-    """``estimate_points`` hands ``steep_step_ratio`` and ``steep_step_min`` to the cut: the
-    pairs straight through a hand 6 cm in front of the chest are gone from what it uses."""
+    """``estimate_points`` hands ``steep_step_ratio`` and ``steep_step_min`` to the cut, and
+    the graph it builds is the full graph less exactly the pairs the cut names: some of those
+    straight through a hand 6 cm in front of the chest, none elsewhere."""
     chest = _patch((0.0, 0.0, 2.0), size=0.6)
     hand = _patch((0.0, 0.06, 1.94), size=0.12)
     cloud = np.concatenate([chest, hand])
     on_hand = np.r_[np.zeros(len(chest), bool), np.ones(len(hand), bool)]
-    seen = []
-    original = Neighbours.without_steps
+    seen, built = [], []
+    original_cut, original_build = bands.steep_pairs, Neighbours.build.__func__
 
-    def spy(self, points, ratio, min_step):
-        out = original(self, points, ratio, min_step)
-        seen.append((ratio, min_step, out))
+    def spy_cut(points, i, j, d, ratio, min_step):
+        out = original_cut(points, i, j, d, ratio, min_step)
+        seen.append((ratio, min_step))
         return out
 
-    monkeypatch.setattr(Neighbours, 'without_steps', spy)
+    def spy_build(cls, *args, **kwargs):
+        out = original_build(cls, *args, **kwargs)
+        built.append(out)
+        return out
+
+    monkeypatch.setattr(bands, 'steep_pairs', spy_cut)
+    monkeypatch.setattr(Neighbours, 'build', classmethod(spy_build))
     params = dataclasses.replace(EndeffParams(), steep_step_ratio=3.0, steep_step_min=0.05,
                                  min_entity_points=10)
     estimate_points(cloud, params)
-    (ratio, min_step, cut), = seen
-    assert (ratio, min_step) == (3.0, 0.05)
-    full = Neighbours.build(cloud, 0.08)
+    assert seen == [(3.0, 0.05)]
+    cut = built[0]
+    full = original_build(Neighbours, cloud, 0.08)
     joined_before = np.count_nonzero(on_hand[full.i] != on_hand[full.j])
     joined_after = np.count_nonzero(on_hand[cut.i] != on_hand[cut.j])
     assert 0 < joined_after < joined_before
     assert len(cut.i) == len(full.i) - (joined_before - joined_after)
+    assert len(full.without_steps(cloud, 3.0, 0.05).i) == len(cut.i)

@@ -134,8 +134,9 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
     """
     params = params or EndeffParams()
     timer = timer or _StageTimer()
-    neighbours = Neighbours.build(points, max(params.band_delta, params.attach_distance))
-    neighbours = neighbours.without_steps(points, params.steep_step_ratio, params.steep_step_min)
+    neighbours = Neighbours.build(points, max(params.band_delta, params.attach_distance),
+                                  steep_ratio=params.steep_step_ratio,
+                                  steep_min=params.steep_step_min)
     within = (neighbours.within(params.band_delta)
               if params.attach_distance > params.band_delta else neighbours)
     dense = density_mask(within, params.band_eta)
