@@ -1158,7 +1158,7 @@ def test_steep_steps_cut_a_surface_in_front_of_another():
     full = Neighbours.build(cloud, 0.08)
     across = on_hand[full.i] != on_hand[full.j]
     assert across.any()
-    cut = full.without_steps(cloud, 3.0, 0.04)
+    cut = Neighbours.build(cloud, 0.08, steep_ratio=3.0, steep_min=0.04)
     kept = {(int(a), int(b)) for a, b in zip(cut.i, cut.j)}
     pairs = list(zip(full.i.tolist(), full.j.tolist()))
     # Pairs across the step that are more behind each other than beside each other go.
@@ -1170,7 +1170,7 @@ def test_steep_steps_cut_a_surface_in_front_of_another():
         if not x:
             assert (a, b) in kept
     assert len(cut.i) < len(full.i)
-    off = full.without_steps(cloud, 0.0, 0.04)
+    off = Neighbours.build(cloud, 0.08, steep_ratio=0.0, steep_min=0.04)
     assert len(off.i) == len(full.i)
 
 
@@ -1180,7 +1180,7 @@ def test_steep_steps_keep_a_surface_seen_obliquely(tilt):
     times farther apart along the ray than across it) keeps all its pairs at ratio 3."""
     plane = _patch((0.0, 0.0, 2.0), size=0.4, tilt_deg=tilt)
     full = Neighbours.build(plane, 0.08)
-    assert len(full.without_steps(plane, 3.0, 0.04).i) == len(full.i)
+    assert len(Neighbours.build(plane, 0.08, steep_ratio=3.0, steep_min=0.04).i) == len(full.i)
 
 
 def test_estimator_cuts_steep_steps_with_its_parameters(monkeypatch):
@@ -1216,4 +1216,3 @@ def test_estimator_cuts_steep_steps_with_its_parameters(monkeypatch):
     joined_after = np.count_nonzero(on_hand[cut.i] != on_hand[cut.j])
     assert 0 < joined_after < joined_before
     assert len(cut.i) == len(full.i) - (joined_before - joined_after)
-    assert len(full.without_steps(cloud, 3.0, 0.05).i) == len(cut.i)

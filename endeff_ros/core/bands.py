@@ -100,15 +100,6 @@ class Neighbours:
                    d: npt.NDArray[np.float64]) -> Neighbours:
         return cls(n, i, j, d, *symmetric_csr(n, i, j, d))
 
-    def without_steps(self, points: npt.NDArray[np.float64], ratio: float,
-                      min_step: float) -> Neighbours:
-        """These pairs less those one behind the other (:func:`steep_pairs`); ``ratio`` 0
-        keeps every pair."""
-        if ratio <= 0 or self.i.size == 0:
-            return self
-        keep = ~steep_pairs(points, self.i, self.j, self.d, ratio, min_step)
-        return Neighbours.from_pairs(self.n, self.i[keep], self.j[keep], self.d[keep])
-
     def within(self, radius: float) -> Neighbours:
         """The pairs closer than ``radius`` (a smaller radius than the one built with)."""
         keep = self.d < radius
