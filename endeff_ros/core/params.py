@@ -95,10 +95,11 @@ class EndeffParams:
                          lo=1, hi=1000)
     entity_gap: float = _p(0.25, 'Foreground clusters closer than this are one entity; the band '
                            'expansion bridges such occlusion gaps.', unit='m', lo=0.0, hi=2.0)
-    steep_step_ratio: float = _p(0.0, 'Neighbours one behind the other: a pair of points is no '
+    steep_step_ratio: float = _p(4.0, 'Neighbours one behind the other: a pair of points is no '
                                  'neighbour when it is more than this many times farther apart '
                                  'along the viewing ray than across it, and farther than '
                                  'steep_step_min along it (a hand in front of the chest); '
+                                 '4 keeps every surface seen within 76 degrees of head-on; '
                                  '0 = off.',
                                  lo=0.0, hi=100.0)
     steep_step_min: float = _p(0.04, 'Neighbours one behind the other: the least step along the '
