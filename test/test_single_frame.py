@@ -1183,6 +1183,33 @@ def test_steep_steps_keep_a_surface_seen_obliquely(tilt):
     assert len(Neighbours.build(plane, 0.08, steep_ratio=3.0, steep_min=0.04).i) == len(full.i)
 
 
+@pytest.mark.parametrize('off_axis', [0.0, 60.0])
+def test_steep_steps_follow_the_viewing_ray_not_the_optical_axis(off_axis):
+    """A hand 6 cm in front of the chest along the viewing ray, both facing the camera, seen
+    on the optical axis or 60 degrees off it: the pair from each hand point to the chest
+    point straight behind it is cut, no pair within either surface is. Off the axis that
+    step is only 3 cm in z, under ``steep_min``: a rule on z alone would keep it."""
+    t = np.deg2rad(off_axis)
+    ray = np.array([np.sin(t), 0.0, np.cos(t)])
+    across_u, across_v = np.array([np.cos(t), 0.0, -np.sin(t)]), np.array([0.0, 1.0, 0.0])
+    g = np.arange(-0.15, 0.15 + 1e-9, 0.03)
+    u, v = (a.ravel() for a in np.meshgrid(g, g))
+    chest = 2.0 * ray + u[:, None] * across_u + v[:, None] * across_v
+    small = (np.abs(u) <= 0.045) & (np.abs(v) <= 0.045)
+    # The hand's points lie on the rays through the chest points they hide.
+    hand = chest[small] * (1.0 - 0.06 / 2.0)
+    cloud = np.concatenate([chest, hand])
+    on_hand = np.r_[np.zeros(len(chest), bool), np.ones(len(hand), bool)]
+    cut = Neighbours.build(cloud, 0.08, steep_ratio=4.0, steep_min=0.04)
+    full = Neighbours.build(cloud, 0.08)
+    kept = set(zip(cut.i.tolist(), cut.j.tolist()))
+    behind = np.flatnonzero(small)
+    for k, b in enumerate(behind):
+        assert (int(b), len(chest) + k) not in kept
+    same = on_hand[full.i] == on_hand[full.j]
+    assert all(p in kept for p in zip(full.i[same].tolist(), full.j[same].tolist()))
+
+
 def test_estimator_cuts_steep_steps_with_its_parameters(monkeypatch):
     """``estimate_points`` hands ``steep_step_ratio`` and ``steep_step_min`` to the cut, and
     the graph it builds is the full graph less exactly the pairs the cut names: some of those

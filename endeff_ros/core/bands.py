@@ -142,8 +142,8 @@ def steep_pairs(points: npt.NDArray[np.float64], i: npt.NDArray[np.intp],
     the chest and the chest behind it, which the radius graph (δ_L) otherwise makes one
     surface, so the band expansion passes from the chest straight into the hand and the hand
     is no extreme of the graph. A surface seen at incidence θ has neighbours with
-    along / across = tan θ, so a ratio of 3 keeps every surface seen within about 72 degrees
-    of head-on (sensors return few readings beyond 80). "Along the ray" is the difference of
+    along / across = tan θ, so a ratio of 4 keeps every surface seen within 76 degrees of
+    head-on (sensors return few readings beyond 80). "Along the ray" is the difference of
     the two points' ranges from the camera: for neighbours a few centimetres apart at a
     metre or more it equals the separation along the ray through their midpoint to within a
     fraction of a millimetre, and it needs one range per point and 1-D gathers only (a
