@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import cv2
@@ -91,8 +92,6 @@ def test_main_writes_the_picture_and_refuses_a_missing_frame(room_bag, tmp_path,
 def test_cut_sub_bands_are_marked(viewed):
     """Sub-bands the image border cuts are drawn white and flagged in the summary. The
     intrinsics are narrowed to the left half of the image, so that the body is cut."""
-    import dataclasses
-
     frame, truth, result = viewed
     est = result.estimate
     u = frame.intrinsics.project(est.points)[:, 0]
