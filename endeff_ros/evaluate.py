@@ -56,11 +56,14 @@ from endeff_ros.core.types import Track
 from endeff_ros.scoring import (
     KINDS,
     MATCH_THRESHOLD_M,
+    SEEN_RADIUS_M,
     MethodScore,
     SequenceScorer,
     kinds_of_ids,
     mean_kinds_over_sequences,
     mean_over_sequences,
+    nanmean,
+    seen_labels,
     summary_dict,
 )
 
@@ -192,6 +195,9 @@ class SequenceResult:
         out['counts'] = {m: summary_dict(self.scorers[m]) for m in METHODS}
         out['counts']['temporal']['predicted_false_positives'] = self.predicted_false_positives
         out['labels_in_box'] = _in_box_json(self.gt_points, self.gt_in_box)
+        out['labels_seen'] = _seen_json(self.gt_points,
+                                        self.scorers['temporal'].seen_points,
+                                        {m: self.scorers[m].seen_recall for m in METHODS})
         out['estimator_input_errors'] = dict(self.input_errors)
         out['seconds'] = {k: round(v, 4) for k, v in self.seconds.items()}
         out['read_stats'] = self.stats
@@ -206,6 +212,14 @@ class SequenceResult:
 def _in_box_json(points: int, inside: int) -> dict[str, Any]:
     return {'points': points, 'inside': inside,
             'fraction': round(inside / points, 4) if points else None}
+
+
+def _seen_json(points: int, seen: int, recall: dict[str, float]) -> dict[str, Any]:
+    """Ground-truth points seen (:func:`~endeff_ros.scoring.seen_labels`) and each method's
+    recall over them."""
+    return {'points': points, 'seen': seen,
+            'fraction': round(seen / points, 4) if points else None,
+            'radius_m': SEEN_RADIUS_M, 'recall': {m: _jf(recall[m]) for m in METHODS}}
 
 
 def _jf(value: float) -> float | None:
@@ -273,14 +287,16 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
             res.seconds['read'] += t1 - t0
             res.seconds['temporal'] += t2 - t1
             res.seconds['single_frame'] += t3 - t2
-            kinds = None
+            kinds = seen = None
+            if gt is not None:
+                seen = seen_labels(gt, frame.depth, frame.intrinsics)
             if gt is not None and frame.stamp_ns in ids_by_stamp:
                 ids = ids_by_stamp[frame.stamp_ns]
                 kinds = kinds_of_ids(ids, person=res.person) if len(ids) == len(gt) else None
             if progress is not None:
                 progress(1)
             for m in METHODS:
-                score = res.scorers[m].add(est[m], gt, kinds)
+                score = res.scorers[m].add(est[m], gt, kinds, seen)
                 if score is not None:
                     res.recalls[m].append(score.recall)
                     res.false_positives[m].append(score.fp)
@@ -363,6 +379,9 @@ def _group_entry(inside: Sequence[SequenceResult], attribute: str | None) -> dic
         entry[m] = mean_over_sequences([r.score(m) for r in inside]).to_json()
     entry['kinds'] = {m: {k: v.to_json() for k, v in mean_kinds_over_sequences(
         [r.kind_scores(m) for r in inside]).items()} for m in METHODS}
+    entry['labels_seen'] = _seen_json(
+        sum(r.gt_points for r in inside), sum(r.scorers['temporal'].seen_points for r in inside),
+        {m: nanmean(r.scorers[m].seen_recall for r in inside) for m in METHODS})
     return entry
 
 
@@ -374,7 +393,9 @@ def build_report(results: Sequence[SequenceResult], failed: Sequence[tuple[str, 
     report: dict[str, Any] = {'sequences': [r.to_json() for r in results]}
     report['overall'] = {m: mean_over_sequences([r.score(m) for r in results]).to_json()
                          for m in METHODS}
-    report['kinds'] = _group_entry(results, None)['kinds']
+    whole = _group_entry(results, None)
+    report['kinds'] = whole['kinds']
+    report['labels_seen'] = whole['labels_seen']
     report['labels_in_box'] = _in_box_json(sum(r.gt_points for r in results),
                                            sum(r.gt_in_box for r in results))
     groups = {}
@@ -394,7 +415,9 @@ def build_report(results: Sequence[SequenceResult], failed: Sequence[tuple[str, 
                              'recall = true positives / ground-truth points of that kind in a '
                              'sequence, groups and overall the mean over the sequences having '
                              'that kind; null: undefined (no ground truth points or no true '
-                             'positive)')
+                             'positive); labels_seen: ground-truth points with depth readings '
+                             f'within {SEEN_RADIUS_M} m, recall over them (a diagnostic, not '
+                             'used by the scores)')
     if params is not None:
         report['params'] = params.to_dict()
     return report
@@ -444,6 +467,14 @@ def format_table(report: dict[str, Any]) -> str:
         lines.append(f'ground-truth points inside the foreground box: {inside["inside"]} of '
                      f'{inside["points"]} ({100 * inside["fraction"]:.1f} %); no estimator finds '
                      'one outside it')
+    seen = report.get('labels_seen', {})
+    if seen.get('points'):
+        rec = seen['recall']
+        lines.append(f'ground-truth points with depth readings within {seen["radius_m"]} m '
+                     f'(seen): {seen["seen"]} of {seen["points"]} '
+                     f'({100 * seen["fraction"]:.1f} %); '
+                     f'recall over them: temporal {_num(rec["temporal"], ".3f")}, single-frame '
+                     f'{_num(rec["single_frame"], ".3f")}')
     kinds = _kind_table(report, width)
     if kinds:
         lines += ['', *kinds]

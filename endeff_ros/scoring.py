@@ -27,6 +27,14 @@ points per frame), and its mean error the mean over those TP pairs. The matching
 one-to-one matching over all kinds as above, so a kind's recall never counts an estimate that
 the frame's Hungarian assignment gave to another point.
 
+A ground-truth point is *seen* in a frame when the depth image holds at least
+:data:`SEEN_MIN_READINGS` readings within :data:`SEEN_RADIUS_M` of it (:func:`seen_labels`).
+The benchmark counts every end-effector in view, seen or not (the paper's M_human is
+constant), so a hand behind a shelf or beyond the sensor's range is a miss whatever a
+single-frame estimator does; the recall over the seen points (``seen_recall``, extra report
+keys) separates those from the estimator's own misses. It is a diagnostic only: the scores
+above do not use it.
+
 References
 ----------
 Lin, Pardàs & Casas, *Time-consistent estimation of end-effectors from RGB-D data*, 2016,
@@ -56,6 +64,45 @@ PERSON_KINDS = ('head', 'hand', 'hand', 'foot', 'foot')
 2 right hand, 3 left foot, 4 right foot, +5 per further person: the benchmark-bag contract)."""
 KINDS = ('head', 'hand', 'foot', 'other')
 """Every kind reported, in report order."""
+
+SEEN_RADIUS_M = 0.10
+"""A ground-truth point is seen when depth readings lie within this distance (m) of it: the
+labels are part centres, at most a head's radius (under 0.1 m) behind the visible surface."""
+SEEN_MIN_READINGS = 3
+"""Readings needed within :data:`SEEN_RADIUS_M` (one or two stray pixels are no surface)."""
+
+
+def seen_labels(labels: npt.ArrayLike, depth: npt.NDArray[np.floating], intrinsics: Any, *,
+                radius: float = SEEN_RADIUS_M,
+                min_readings: int = SEEN_MIN_READINGS) -> npt.NDArray[np.bool_]:
+    """(N,) whether each (N, 3) label (optical frame, m) has at least ``min_readings`` depth
+    readings within ``radius`` metres in the (H, W) ``depth`` image (m, NaN or <= 0 = none).
+
+    ``intrinsics`` has ``fx, fy, cx, cy``. Only the pixels of a window that holds the sphere's
+    projection are back-projected, so a label costs a few hundred pixels at most; a label
+    behind the camera or projecting outside the image is not seen.
+    """
+    pts = np.asarray(labels, dtype=np.float64).reshape(-1, 3)
+    out = np.zeros(len(pts), dtype=bool)
+    h, w = depth.shape
+    fx, fy, cx, cy = (float(intrinsics.fx), float(intrinsics.fy), float(intrinsics.cx),
+                      float(intrinsics.cy))
+    for i, (x, y, z) in enumerate(pts):
+        if not z > radius:
+            continue
+        half = int(np.ceil(max(fx, fy) * radius / (z - radius)))
+        u, v = fx * x / z + cx, fy * y / z + cy
+        u0, u1 = max(int(np.floor(u)) - half, 0), min(int(np.floor(u)) + half + 1, w)
+        v0, v1 = max(int(np.floor(v)) - half, 0), min(int(np.floor(v)) + half + 1, h)
+        if u0 >= u1 or v0 >= v1:
+            continue
+        d = np.asarray(depth[v0:v1, u0:u1], dtype=np.float64)
+        vv, uu = np.nonzero(np.isfinite(d) & (d > 0))
+        zz = d[vv, uu]
+        dist2 = (((uu + u0 - cx) * zz / fx - x) ** 2 + ((vv + v0 - cy) * zz / fy - y) ** 2
+                 + (zz - z) ** 2)
+        out[i] = np.count_nonzero(dist2 <= radius * radius) >= min_readings
+    return out
 
 
 def kinds_of_ids(ids: npt.ArrayLike, *, person: bool) -> npt.NDArray[np.str_]:
@@ -172,11 +219,18 @@ class KindScore:
     mean_error_m: float
     gt_points: int
     tp: int
+    #: Recall over the seen points of that kind (:func:`seen_labels`), and their counts.
+    seen_recall: float = math.nan
+    seen_points: int = 0
+    seen_tp: int = 0
 
     def to_json(self) -> dict[str, float | int | None]:
-        """``{"recall", "mean_error_m", "gt_points", "tp"}``, ``None`` for undefined values."""
+        """``{"recall", "mean_error_m", "gt_points", "tp", "seen_recall", "seen_points",
+        "seen_tp"}``, ``None`` for undefined values."""
         return {'recall': _json_float(self.recall), 'mean_error_m': _json_float(self.mean_error_m),
-                'gt_points': self.gt_points, 'tp': self.tp}
+                'gt_points': self.gt_points, 'tp': self.tp,
+                'seen_recall': _json_float(self.seen_recall), 'seen_points': self.seen_points,
+                'seen_tp': self.seen_tp}
 
 
 def _json_float(value: float) -> float | None:
@@ -199,15 +253,22 @@ class SequenceScorer:
     tp: int = 0
     n_gt: int = 0
     n_est: int = 0
-    #: kind -> [ground-truth points, TPs, sum of TP errors (m)] over the scored frames.
+    #: Ground-truth points seen (:func:`seen_labels`) and those of them that are TPs, over the
+    #: frames whose ``seen`` mask was given.
+    seen_points: int = 0
+    seen_tp: int = 0
+    #: kind -> [ground-truth points, TPs, sum of TP errors (m), seen points, seen TPs] over the
+    #: scored frames.
     kinds: dict[str, list[float]] = field(default_factory=dict)
 
     def add(self, estimated: npt.ArrayLike | None, ground_truth: npt.ArrayLike | None,
-            kinds: npt.ArrayLike | None = None) -> FrameScore | None:
+            kinds: npt.ArrayLike | None = None,
+            seen: npt.ArrayLike | None = None) -> FrameScore | None:
         """Score one frame; returns its :class:`FrameScore` (None when not annotated).
 
         ``kinds``: optional (N,) kind name per ground-truth point (see :func:`kinds_of_ids`);
-        frames without it do not count in :meth:`kind_result`.
+        frames without it do not count in :meth:`kind_result`. ``seen``: optional (N,) bool,
+        which ground-truth points are seen (:func:`seen_labels`), for :attr:`seen_recall`.
         """
         self.frames += 1
         if ground_truth is None:
@@ -219,30 +280,50 @@ class SequenceScorer:
         self.tp += score.tp
         self.n_gt += score.n_gt
         self.n_est += score.n_est
+        seen_mask = None
+        if seen is not None:
+            seen_mask = np.asarray(seen, dtype=bool).reshape(-1)
+            if len(seen_mask) != score.n_gt:
+                msg = f'{len(seen_mask)} seen flags given for {score.n_gt} ground-truth points'
+                raise ValueError(msg)
+            self.seen_points += int(np.count_nonzero(seen_mask))
+            self.seen_tp += int(np.count_nonzero(seen_mask[score.matches[:, 1]]))
         if kinds is not None:
-            self._add_kinds(np.asarray(kinds).reshape(-1), score)
+            self._add_kinds(np.asarray(kinds).reshape(-1), score, seen_mask)
         return score
 
-    def _add_kinds(self, kinds: npt.NDArray[np.str_], score: FrameScore) -> None:
+    def _add_kinds(self, kinds: npt.NDArray[np.str_], score: FrameScore,
+                   seen: npt.NDArray[np.bool_] | None) -> None:
         if len(kinds) != score.n_gt:
             msg = f'{len(kinds)} kinds given for {score.n_gt} ground-truth points'
             raise ValueError(msg)
         matched = kinds[score.matches[:, 1]]
+        matched_seen = None if seen is None else seen[score.matches[:, 1]]
         for kind in np.unique(kinds).tolist():
-            acc = self.kinds.setdefault(kind, [0, 0, 0.0])
+            acc = self.kinds.setdefault(kind, [0, 0, 0.0, 0, 0])
             hit = matched == kind
             acc[0] += int(np.count_nonzero(kinds == kind))
             acc[1] += int(np.count_nonzero(hit))
             acc[2] += float(score.errors[hit].sum())
+            if seen is not None and matched_seen is not None:
+                acc[3] += int(np.count_nonzero(seen & (kinds == kind)))
+                acc[4] += int(np.count_nonzero(matched_seen & hit))
 
     def kind_result(self) -> dict[str, KindScore]:
-        """Per kind (in :data:`KINDS` order): recall over its ground-truth points, mean error."""
+        """Per kind (in :data:`KINDS` order): recall over its ground-truth points, mean error,
+        recall over its seen points."""
         out = {}
         for kind in sorted(self.kinds, key=_kind_key):
-            n, tp, err = self.kinds[kind]
+            n, tp, err, n_seen, tp_seen = self.kinds[kind]
             out[kind] = KindScore(tp / n if n else math.nan, err / tp if tp else math.nan,
-                                  int(n), int(tp))
+                                  int(n), int(tp), tp_seen / n_seen if n_seen else math.nan,
+                                  int(n_seen), int(tp_seen))
         return out
+
+    @property
+    def seen_recall(self) -> float:
+        """TPs among the seen ground-truth points over the seen points (``nan`` without any)."""
+        return self.seen_tp / self.seen_points if self.seen_points else math.nan
 
     @property
     def scored_frames(self) -> int:
@@ -251,10 +332,10 @@ class SequenceScorer:
 
     def result(self) -> MethodScore:
         """Sequence recall and FPR (means over scored frames), mean error over all TP pairs."""
-        return MethodScore(_nanmean(self.recalls), _nanmean(self.errors), _nanmean(self.fprs))
+        return MethodScore(nanmean(self.recalls), nanmean(self.errors), nanmean(self.fprs))
 
 
-def _nanmean(values: Iterable[float]) -> float:
+def nanmean(values: Iterable[float]) -> float:
     """Mean of the finite values; ``nan`` when there are none."""
     arr = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
     return float(arr.mean()) if arr.size else math.nan
@@ -262,9 +343,9 @@ def _nanmean(values: Iterable[float]) -> float:
 
 def mean_over_sequences(scores: Sequence[MethodScore]) -> MethodScore:
     """Overall figures: the mean over sequences of each defined value."""
-    return MethodScore(_nanmean(s.recall for s in scores),
-                       _nanmean(s.mean_error_m for s in scores),
-                       _nanmean(s.fpr for s in scores))
+    return MethodScore(nanmean(s.recall for s in scores),
+                       nanmean(s.mean_error_m for s in scores),
+                       nanmean(s.fpr for s in scores))
 
 
 def mean_kinds_over_sequences(scores: Sequence[dict[str, KindScore]]) -> dict[str, KindScore]:
@@ -274,9 +355,11 @@ def mean_kinds_over_sequences(scores: Sequence[dict[str, KindScore]]) -> dict[st
     out = {}
     for kind in kinds:
         have = [s[kind] for s in scores if kind in s]
-        out[kind] = KindScore(_nanmean(k.recall for k in have),
-                              _nanmean(k.mean_error_m for k in have),
-                              sum(k.gt_points for k in have), sum(k.tp for k in have))
+        out[kind] = KindScore(nanmean(k.recall for k in have),
+                              nanmean(k.mean_error_m for k in have),
+                              sum(k.gt_points for k in have), sum(k.tp for k in have),
+                              nanmean(k.seen_recall for k in have),
+                              sum(k.seen_points for k in have), sum(k.seen_tp for k in have))
     return out
 
 
@@ -292,4 +375,5 @@ def score_sequence(estimates: Iterable[npt.ArrayLike | None],
 
 def summary_dict(scorer: SequenceScorer) -> dict[str, Any]:
     """Counts behind a method's sequence score (extra report keys)."""
-    return {'tp': scorer.tp, 'gt_points': scorer.n_gt, 'estimated': scorer.n_est}
+    return {'tp': scorer.tp, 'gt_points': scorer.n_gt, 'estimated': scorer.n_est,
+            'seen_points': scorer.seen_points, 'seen_tp': scorer.seen_tp}

@@ -369,3 +369,26 @@ def test_labels_inside_the_box_are_counted(tmp_path: Path) -> None:
                                                        'fraction': 0.6667}
     assert narrow['labels_in_box']['inside'] == 8
     assert '8 of 12 (66.7 %)' in format_table(narrow)
+
+
+def test_labels_with_depth_readings_are_counted_as_seen(tmp_path: Path) -> None:
+    """Every blob of the test bag is drawn at its label (seen); blobs one pixel wide are no
+    surface (fewer than 3 readings): then nothing is seen and the seen recall is undefined,
+    while the scores stay what they were."""
+    write_bag(tmp_path / 'a', BagSpec(frames=6, gt_frames={0, 2, 3, 5}))
+    write_bag(tmp_path / 'b', BagSpec(frames=6, gt_frames={0, 2, 3, 5}, blob_px=0))
+    drawn, _ = evaluate_bags([tmp_path / 'a'], estimate_fn=_lagging_estimate,
+                             tracker_factory=FakeTracker)
+    seq = drawn['sequences'][0]
+    assert seq['labels_seen']['seen'] == seq['labels_seen']['points'] == 12
+    for m in ('temporal', 'single_frame'):
+        counts = seq['counts'][m]
+        assert counts['seen_tp'] == counts['tp'] > 0
+        assert seq['labels_seen']['recall'][m] == pytest.approx(counts['tp'] / 12)
+    assert drawn['labels_seen']['fraction'] == 1.0
+    assert 'seen): 12 of 12 (100.0 %)' in format_table(drawn)
+    dots, _ = evaluate_bags([tmp_path / 'b'], estimate_fn=_lagging_estimate,
+                            tracker_factory=FakeTracker)
+    assert dots['labels_seen']['seen'] == 0
+    assert dots['labels_seen']['recall'] == {'temporal': None, 'single_frame': None}
+    assert dots['sequences'][0]['single_frame']['recall'] == seq['single_frame']['recall']

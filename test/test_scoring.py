@@ -16,6 +16,7 @@ from endeff_ros.scoring import (
     mean_over_sequences,
     score_frame,
     score_sequence,
+    seen_labels,
 )
 
 
@@ -155,3 +156,59 @@ def test_kind_means_over_sequences() -> None:
     assert (got['hand'].gt_points, got['hand'].tp) == (6, 0)
     assert got['head'].recall == 1.0 and got['other'].mean_error_m == 0.05
     assert got['hand'].to_json()['mean_error_m'] is None
+
+
+def _plane_depth(z: float = 2.0) -> tuple[np.ndarray, object]:
+    """A 160x120 depth image of a wall at ``z`` m, with a 40x40 px hole (NaN) in its centre."""
+    from endeff_ros.core.types import Intrinsics
+
+    k = Intrinsics(200.0, 200.0, 79.5, 59.5, 160, 120)
+    depth = np.full((120, 160), z, np.float32)
+    depth[40:80, 60:100] = np.nan
+    return depth, k
+
+
+def test_seen_labels_need_readings_near_them() -> None:
+    """Seen: readings within 0.1 m. On the wall and 0.08 m behind it: seen; 0.2 m behind it,
+    in the hole, beyond the image or behind the camera: not."""
+    depth, k = _plane_depth()
+    labels = np.array([[-0.5, 0.2, 2.0],    # on the wall
+                       [-0.5, 0.2, 2.08],   # a part centre behind its surface
+                       [-0.5, 0.2, 2.2],    # hidden behind the wall
+                       [0.0, 0.0, 2.0],     # in the hole: no reading within 0.1 m
+                       [3.0, 0.0, 2.0],     # projects outside the image
+                       [0.0, 0.0, -1.0]])   # behind the camera
+    assert seen_labels(labels, depth, k).tolist() == [True, True, False, False, False, False]
+    # Near the hole's edge (0.05 m in x at 2 m = 5 px inside it) readings lie within 0.1 m.
+    assert seen_labels([[0.15, 0.0, 2.0]], depth, k).tolist() == [True]
+    assert seen_labels([[0.15, 0.0, 2.0]], depth, k, radius=0.04).tolist() == [False]
+    assert seen_labels(np.zeros((0, 3)), depth, k).shape == (0,)
+
+
+def test_a_few_stray_readings_are_not_seen() -> None:
+    depth, k = _plane_depth()
+    depth[:] = np.nan
+    depth[59, 79:81] = 2.0  # two readings next to the label
+    assert seen_labels([[0.0, 0.0, 2.0]], depth, k).tolist() == [False]
+    depth[60, 79] = 2.0     # a third one
+    assert seen_labels([[0.0, 0.0, 2.0]], depth, k).tolist() == [True]
+
+
+def test_recall_over_the_seen_points() -> None:
+    gt = np.array([[0.0, 0.0, 2.0], [0.5, 0.0, 2.0], [0.0, 1.0, 2.0]])
+    kinds = np.array(['head', 'hand', 'hand'])
+    scorer = SequenceScorer()
+    # The head (seen) found, the seen hand missed, the unseen hand found (predicted).
+    scorer.add([[0.0, 0.0, 2.0], [0.0, 1.0, 2.0]], gt, kinds, [True, True, False])
+    scorer.add([], gt, kinds, [True, False, False])   # nothing found
+    scorer.add(gt, gt, kinds)                          # no seen flags: left out
+    assert (scorer.seen_points, scorer.seen_tp) == (3, 1)
+    assert scorer.seen_recall == pytest.approx(1 / 3)
+    got = scorer.kind_result()
+    assert (got['head'].seen_points, got['head'].seen_tp) == (2, 1)
+    assert (got['hand'].seen_points, got['hand'].seen_tp) == (1, 0)
+    assert got['hand'].seen_recall == 0.0 and got['hand'].recall == pytest.approx(3 / 6)
+    assert got['hand'].to_json()['seen_recall'] == 0.0
+    assert math.isnan(SequenceScorer().seen_recall)
+    with pytest.raises(ValueError, match='2 seen flags given for 3'):
+        scorer.add(gt, gt, kinds, [True, True])
