@@ -4,8 +4,9 @@ end-effector of the temporal estimator, put in one class each.
 Ground-truth points (the first class that applies):
 
 - ``outside_box``: the point lies outside the foreground box (Section 3 never sees it);
-- ``hidden``: no depth reading of the frame lies within ``SURFACE_M`` of it (occluded,
-  beyond the sensor's range, or a dropout);
+- ``hidden``: not seen (``endeff_ros.scoring.seen_labels``: fewer than 3 depth readings of
+  the frame within 0.1 m of it; occluded, beyond the sensor's range, or a dropout), as the
+  reports' ``labels_seen`` count it;
 - ``removed``: the depth sees it, but no foreground point (after the box, the floor and the
   static background) lies within ``SURFACE_M``: the floor or the background took it;
 - ``found``: a reported end-effector lies within the match threshold (0.15 m);
@@ -38,15 +39,15 @@ from scipy.spatial import cKDTree
 from endeff_ros.attributes import custom_data, parse_attributes
 from endeff_ros.bag.reader import BagReader
 from endeff_ros.cli_common import print_json
-from endeff_ros.core.cloud import box_mask, depth_to_points
+from endeff_ros.core.cloud import box_mask
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.tracker import Tracker
 from endeff_ros.evaluate import gt_ids, is_person_sequence
-from endeff_ros.scoring import MATCH_THRESHOLD_M, kinds_of_ids
+from endeff_ros.scoring import MATCH_THRESHOLD_M, kinds_of_ids, seen_labels
 from tools.per_bag import parse_bag_args, run_per_bag
 
-SURFACE_M = 0.12  # a part's centre lies up to about its radius behind the visible surface
+SURFACE_M = 0.12  # a part's centre lies up to about its radius behind the foreground's surface
 BODY_M = 0.6
 NEAR_M = 0.25
 EARLY_S = 0.5
@@ -83,9 +84,8 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
             gt = gt[:, :3]
             est = np.array([t.position for t in result.tracks]).reshape(-1, 3)
             fg = result.estimate.points
-            seen = depth_to_points(frame.depth, frame.intrinsics, stride=p.pixel_stride)
+            seen = seen_labels(gt, frame.depth, frame.intrinsics)
             d_est = _nearest(est, gt)
-            d_seen = _nearest(seen, gt)
             d_fg = _nearest(fg, gt)
             inside = box_mask(gt, p)
             frame_ids = ids.get(frame.stamp_ns)
@@ -95,7 +95,7 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
             for k in range(len(gt)):
                 if not inside[k]:
                     cls = 'outside_box'
-                elif d_seen[k] > SURFACE_M:
+                elif not seen[k]:
                     cls = 'hidden'
                 elif d_fg[k] > SURFACE_M:
                     cls = 'removed'
