@@ -214,8 +214,8 @@ def test_foreground_cloud_removes_the_tilted_floor_and_reports_it():
     # The box ends before the scene's back wall (5.5 m away), which the pitched camera sees
     # nearer than the default box's far face: only the floor rule is under test here.
     params = EndeffParams(box_max_z=4.3)
-    points, floor = foreground_cloud(scenes.shoot(person, camera).frame.depth, KINECT_640,
-                                     params)
+    points, floor, _ = foreground_cloud(scenes.shoot(person, camera).frame.depth, KINECT_640,
+                                        params)
     assert floor is not None
     assert _angle_deg(floor.normal, up(camera)) < 1.0
     assert np.all(floor.distance(points) > params.floor_distance - 1e-9)
@@ -421,7 +421,7 @@ def test_fit_floor_finds_a_floor_that_a_wall_outnumbers():
     add_chair(depth)
     add_person(depth, 0.2, 0.5, z=CHAIR_Z + 0.1)
     params = EndeffParams(floor_iterations=400, wall_min_area=0.0)
-    _, floor = foreground_cloud(depth, KINECT_640, params)
+    floor = foreground_cloud(depth, KINECT_640, params).floor
     assert floor is not None
     assert _angle_deg(floor.normal, [0.0, -1.0, 0.0]) < 2.0
 
@@ -440,7 +440,7 @@ def test_a_known_floor_follows_the_floor_it_sees():
     floor = FloorPlane(normal, camera.height + 0.03)
     errors = []
     for _ in range(20):
-        _, floor = foreground_cloud(depth, KINECT_640, params, floor=floor)
+        floor = foreground_cloud(depth, KINECT_640, params, floor=floor).floor
         errors.append((_angle_deg(floor.normal, truth), abs(floor.offset - camera.height)))
     assert errors[0][0] < 2.0 and errors[0][1] < 0.03  # each frame moves it closer
     assert errors[-1][0] < 0.2 and errors[-1][1] < 0.005
@@ -456,10 +456,37 @@ def test_a_floor_to_refit_is_fitted_anew_or_kept_when_none_is_found():
     stale = FloorPlane(up(tilted(0.0, 0.0)), camera.height, refit=True)
     params = EndeffParams(box_max_z=4.3)
     person = scenes.person('arms_down', x=0.2)
-    _, floor = foreground_cloud(scenes.shoot(person, camera).frame.depth, KINECT_640, params,
-                                floor=stale)
+    floor = foreground_cloud(scenes.shoot(person, camera).frame.depth, KINECT_640, params,
+                             floor=stale).floor
     assert _angle_deg(floor.normal, up(camera)) < 1.0 and not floor.refit
-    _, kept = foreground_cloud(scenes.shoot(person, camera, floor=False).frame.depth, KINECT_640,
-                               params, floor=stale)
+    kept = foreground_cloud(scenes.shoot(person, camera, floor=False).frame.depth, KINECT_640,
+                            params, floor=stale).floor
     assert np.array_equal(kept.normal, stale.normal) and kept.offset == stale.offset
     assert kept.refit
+
+
+def test_foreground_points_carry_their_pixels_mean_colour():
+    """With ``color_edge_rgb`` > 0 and a colour image, each foreground point (voxel) carries
+    the mean colour of its pixels: a board at 2 m, red on the left, blue on the right, gives
+    red and blue points and mixes only in the voxels across the line; the points are those
+    of the run without colours. Off, or without a colour image, there are none."""
+    depth = np.full((480, 640), np.nan, np.float32)
+    depth[140:340, 220:420] = 2.0
+    color = np.zeros((480, 640, 3), np.uint8)
+    color[:, :320] = (255, 0, 0)
+    color[:, 320:] = (0, 0, 255)
+    params = EndeffParams(floor_removal=False, wall_min_area=0.0, color_edge_rgb=35.0)
+    with_colors = foreground_cloud(depth, KINECT_640, params, color=color)
+    plain = foreground_cloud(depth, KINECT_640, params)
+    assert plain.colors is None
+    np.testing.assert_array_equal(with_colors.points, plain.points)
+    cols = with_colors.colors
+    assert cols is not None and cols.shape == (len(plain.points), 3)
+    red = with_colors.points[:, 0] < -0.03
+    blue = with_colors.points[:, 0] > 0.03
+    assert red.any() and blue.any()
+    np.testing.assert_allclose(cols[red], [[255.0, 0.0, 0.0]] * int(red.sum()))
+    np.testing.assert_allclose(cols[blue], [[0.0, 0.0, 255.0]] * int(blue.sum()))
+    np.testing.assert_allclose(cols.sum(axis=1), 255.0)  # the line's voxels mix the two
+    off = params.replace(color_edge_rgb=0.0)
+    assert foreground_cloud(depth, KINECT_640, off, color=color).colors is None

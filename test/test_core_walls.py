@@ -41,8 +41,7 @@ def noisy(depth: np.ndarray, seed: int = 0) -> np.ndarray:
 
 
 def cloud(depth: np.ndarray, **kw: float) -> np.ndarray:
-    points, _ = foreground_cloud(noisy(depth), K, PARAMS.replace(**kw))
-    return points
+    return foreground_cloud(noisy(depth), K, PARAMS.replace(**kw)).points
 
 
 def near(points: np.ndarray, z: float, tol: float = 0.05) -> int:

@@ -409,9 +409,8 @@ CLOUD_PARAMS = EndeffParams(voxel_size=0.0, floor_removal=False)
 
 @functools.cache
 def foreground(kind, arg, variant):
-    points, _ = foreground_cloud(rendered(kind, arg, variant).frame.depth, KINECT_640,
-                                 EndeffParams())
-    return points
+    return foreground_cloud(rendered(kind, arg, variant).frame.depth, KINECT_640,
+                            EndeffParams()).points
 
 
 @pytest.mark.parametrize('kind, arg, variant', INVARIANCE_SCENES)
@@ -1243,3 +1242,63 @@ def test_estimator_cuts_steep_steps_with_its_parameters(monkeypatch):
     joined_after = np.count_nonzero(on_hand[cut.i] != on_hand[cut.j])
     assert 0 < joined_after < joined_before
     assert len(cut.i) == len(full.i) - (joined_before - joined_after)
+
+
+SHIRT, SKIN = (40.0, 80.0, 100.0), (150.0, 115.0, 90.0)
+
+
+def _hand_on_belly(hand_color=SKIN):
+    """A belly facing the camera at 2 m, half of it patterned (another colour at the same
+    depth), and a hand lying on it 2.5 cm nearer; (cloud, colours, on_hand)."""
+    chest = _patch((0.0, 0.0, 2.0), size=0.4)
+    hand = _patch((0.0, 0.0, 1.975), size=0.1)
+    cloud = np.concatenate([chest, hand])
+    colors = np.array([SHIRT] * len(chest) + [hand_color] * len(hand))
+    colors[:len(chest)][chest[:, 0] > 0.1] = (200.0, 40.0, 40.0)  # the pattern
+    on_hand = np.r_[np.zeros(len(chest), bool), np.ones(len(hand), bool)]
+    return cloud, colors, on_hand
+
+
+def test_colour_edges_cut_a_hand_lying_on_the_belly():
+    """Every pair between the hand and the belly behind or beside it (ranges 2.5 cm apart,
+    colours far apart) is cut, whatever its direction; the pattern's edge on the belly (no
+    step) and the hand's own pairs stay; a hand of the shirt's colour, or the rule off,
+    keeps every pair."""
+    cloud, colors, on_hand = _hand_on_belly()
+    full = Neighbours.build(cloud, 0.08)
+    across = on_hand[full.i] != on_hand[full.j]
+    cut = Neighbours.build(cloud, 0.08, colors=colors, color_rgb=35.0, color_step=0.015)
+    kept = set(zip(cut.i.tolist(), cut.j.tolist()))
+    for a, b, x in zip(full.i.tolist(), full.j.tolist(), across):
+        assert ((a, b) in kept) != bool(x)
+    patterned = (colors[full.i] != colors[full.j]).any(axis=1) & ~across
+    assert patterned.any()  # the pattern's edge is there, and kept (checked above)
+    same, _, _ = _hand_on_belly(hand_color=SHIRT)
+    shirt = np.array([SHIRT] * len(same))
+    assert len(Neighbours.build(same, 0.08, colors=shirt, color_rgb=35.0,
+                                color_step=0.015).i) == len(Neighbours.build(same, 0.08).i)
+    assert len(Neighbours.build(cloud, 0.08, colors=colors, color_rgb=0.0,
+                                color_step=0.015).i) == len(full.i)
+    # A step under color_step is no edge: the hand 1 cm nearer keeps its pairs.
+    assert bands.color_edge_pairs(cloud, colors, full.i, full.j, 35.0, 0.03).sum() == 0
+
+
+def test_estimator_cuts_colour_edges_with_its_parameters(monkeypatch):
+    """``estimate_points`` hands the colours, ``color_edge_rgb`` and ``color_edge_step`` to
+    the cut; without colours (a depth-only stream) there is nothing to cut."""
+    cloud, colors, on_hand = _hand_on_belly()
+    asked = []
+    original = bands.color_edge_pairs
+
+    def spy(points, cols, i, j, rgb, min_step):
+        asked.append((cols is colors, rgb, min_step))
+        return original(points, cols, i, j, rgb, min_step)
+
+    monkeypatch.setattr(bands, 'color_edge_pairs', spy)
+    params = dataclasses.replace(EndeffParams(), color_edge_rgb=50.0, color_edge_step=0.02,
+                                 min_entity_points=10)
+    estimate_points(cloud, params, colors=colors)
+    assert asked == [(True, 50.0, 0.02)]
+    estimate_points(cloud, params)
+    estimate_points(cloud, dataclasses.replace(params, color_edge_rgb=0.0), colors=colors)
+    assert len(asked) == 1

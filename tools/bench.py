@@ -98,7 +98,7 @@ def _foreground_pixels(frame: Any, params: Any) -> int:
     from endeff_ros.core.cloud import foreground_cloud
 
     full = params.replace(pixel_stride=1, voxel_size=0.0)
-    return len(foreground_cloud(frame.depth, frame.intrinsics, full)[0])
+    return len(foreground_cloud(frame.depth, frame.intrinsics, full).points)
 
 
 def bench_full_pipeline(sequence: str = 'waving_two_hands', repeats: int = 2,

@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import cv2
 import numpy as np
@@ -22,7 +22,7 @@ from .params import EndeffParams
 from .types import Intrinsics
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
+    from collections.abc import Callable, Sequence
 
     import numpy.typing as npt
 
@@ -277,11 +277,13 @@ def voxel_downsample(points: npt.NDArray[np.float64], size: float) -> npt.NDArra
     return _voxel_means((points[:, 0], points[:, 1], points[:, 2]), size)
 
 
-def _voxel_means(cols: Columns, size: float) -> npt.NDArray[np.float64]:
-    """:func:`voxel_downsample` on x, y, z columns (N >= 1): one sort of the cell keys, then
-    per-cell sums of the sorted columns."""
+def _voxel_means(cols: Sequence[npt.NDArray[np.float64]],
+                 size: float) -> npt.NDArray[np.float64]:
+    """:func:`voxel_downsample` on x, y, z columns (N >= 1), and the means of any further
+    columns (a colour) over the same cells: one sort of the cell keys, then per-cell sums of
+    the sorted columns; (M, len(cols))."""
     cells = []
-    for c in cols:
+    for c in cols[:3]:
         cell = np.floor(c / size).astype(np.int64)
         cell -= cell.min()
         cells.append(cell)
@@ -290,7 +292,7 @@ def _voxel_means(cols: Columns, size: float) -> npt.NDArray[np.float64]:
     sorted_keys = keys[order]
     starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
     counts = np.diff(np.r_[starts, len(keys)])
-    out = np.empty((len(starts), 3))
+    out = np.empty((len(starts), len(cols)))
     for axis, c in enumerate(cols):
         out[:, axis] = np.add.reduceat(c[order], starts) / counts
     return out
@@ -356,11 +358,22 @@ def _off_background(background: BackgroundModel, z_image: npt.NDArray[np.floatin
     return changed is not None and changed >= FLOOR_MOVED_CHANGED
 
 
+class ForegroundCloud(NamedTuple):
+    """What :func:`foreground_cloud` keeps of a frame."""
+
+    #: (N, 3) foreground points, metres, optical frame.
+    points: npt.NDArray[np.float64]
+    #: The floor plane for the next frame (or None).
+    floor: FloorPlane | None
+    #: (N, 3) mean colour (0-255 RGB) of each point's pixels, when the colour image was given
+    #: and ``color_edge_rgb`` asks for it; else None.
+    colors: npt.NDArray[np.float64] | None = None
+
+
 def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
                      params: EndeffParams, *, floor: FloorPlane | None = None,
                      background: BackgroundModel | None = None, stamp_ns: int = 0,
-                     color: npt.NDArray[np.uint8] | None = None,
-                     ) -> tuple[npt.NDArray[np.float64], FloorPlane | None]:
+                     color: npt.NDArray[np.uint8] | None = None) -> ForegroundCloud:
     """Section 3 in one call: back-project, crop to the box, drop the floor, drop the static
     background, voxelise.
 
@@ -369,8 +382,9 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
     ``background``: a :class:`~endeff_ros.core.background.BackgroundModel` that learns from
     this frame (stamped ``stamp_ns``, with its registered ``color`` image if given) and keeps
     only the parts of the box that moved.
-    Returns the (N, 3) foreground points and the floor plane (or None): the one fitted, or
-    the known one moved towards this frame's floor (:func:`follow_floor`), for the next frame.
+    Returns the (N, 3) foreground points, the floor plane (or None: the one fitted, or the
+    known one moved towards this frame's floor, :func:`follow_floor`, for the next frame)
+    and, with ``color`` and ``params.color_edge_rgb`` > 0, each point's mean colour.
     """
     z_image, valid = _valid_pixels(depth, intrinsics, params.pixel_stride,
                                    (params.box_min_z, params.box_max_z), params.depth_median)
@@ -416,10 +430,16 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
         z_image = np.where(z_image <= MAX_RANGE_M, z_image, 0)  # NaN compares False: 0 too
         keep = background.foreground(z_image, candidate, stamp_ns, params, low=low,
                                      color=color)[valid]
-    x, y, z = x[keep], y[keep], z[keep]
-    if params.voxel_size <= 0 or len(z) == 0:
-        return np.stack([x, y, z], axis=1), floor
-    return _voxel_means((x, y, z), params.voxel_size), floor
+    cols: tuple[npt.NDArray[np.float64], ...] = (x[keep], y[keep], z[keep])
+    if color is not None and params.color_edge_rgb > 0:
+        rgb = color[::params.pixel_stride, ::params.pixel_stride][valid][keep]
+        cols += tuple(rgb[:, k].astype(np.float64) for k in range(3))
+    if params.voxel_size <= 0 or len(cols[0]) == 0:
+        out = np.stack(cols, axis=1).reshape(-1, len(cols))
+    else:
+        out = _voxel_means(cols, params.voxel_size)
+    colors = np.ascontiguousarray(out[:, 3:]) if len(cols) > 3 else None
+    return ForegroundCloud(np.ascontiguousarray(out[:, :3]), floor, colors)
 
 
 def wall_points(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],

@@ -105,6 +105,13 @@ class EndeffParams:
     steep_step_min: float = _p(0.04, 'Neighbours one behind the other: the least step along the '
                                'viewing ray that steep_step_ratio cuts.', unit='m', lo=0.0,
                                hi=1.0)
+    color_edge_rgb: float = _p(0.0, 'Colour edges: a pair of neighbours whose mean colours (0-255 '
+                               'RGB, Euclidean) differ by more than this and whose ranges '
+                               'differ by more than color_edge_step is no neighbour (a hand '
+                               'against the belly); needs the colour image; 0 = off.',
+                               lo=0.0, hi=442.0)
+    color_edge_step: float = _p(0.015, 'Colour edges: the least step along the viewing ray '
+                                'that color_edge_rgb cuts.', unit='m', lo=0.0, hi=1.0)
     min_entity_points: int = _p(60, 'Connected foreground clusters smaller than this (after '
                                 'downsampling) are ignored.', lo=1, hi=1000000)
 

@@ -82,14 +82,14 @@ def estimate_frame(frame: RGBDFrame, params: EndeffParams | None = None, *,
     """
     params = params or EndeffParams()
     timer = _StageTimer()
-    points, floor = foreground_cloud(frame.depth, frame.intrinsics, params, floor=floor,
-                                     background=background, stamp_ns=frame.stamp_ns,
-                                     color=frame.color)
+    cloud = foreground_cloud(frame.depth, frame.intrinsics, params, floor=floor,
+                             background=background, stamp_ns=frame.stamp_ns,
+                             color=frame.color)
     timer.lap('cloud')
-    estimate = estimate_points(points, params, timer=timer)
+    estimate = estimate_points(cloud.points, params, colors=cloud.colors, timer=timer)
     if params.drop_cut_ends:
         estimate = drop_cut_ends(estimate, frame.intrinsics, params)
-    return dataclasses.replace(estimate, floor=floor)
+    return dataclasses.replace(estimate, floor=cloud.floor)
 
 
 def cut_nodes(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
@@ -124,8 +124,10 @@ def drop_cut_ends(estimate: FrameEstimate, intrinsics: Intrinsics,
 
 
 def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None = None, *,
+                    colors: npt.NDArray[np.float64] | None = None,
                     timer: _StageTimer | None = None) -> FrameEstimate:
-    """Section 4 on a foreground cloud (N, 3), metres, optical frame.
+    """Section 4 on a foreground cloud (N, 3), metres, optical frame; ``colors`` (N, 3),
+    the points' 0-255 RGB, for ``color_edge_rgb``.
 
     Density (Eq. 3) and entities, the root (refined centroid of the first N bands), narrow
     bands (Eqs. 1-4), sub-bands, the attachment graph (Eq. 5) and its all-pairs geodesics
@@ -136,7 +138,9 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
     timer = timer or _StageTimer()
     neighbours = Neighbours.build(points, max(params.band_delta, params.attach_distance),
                                   steep_ratio=params.steep_step_ratio,
-                                  steep_min=params.steep_step_min)
+                                  steep_min=params.steep_step_min, colors=colors,
+                                  color_rgb=params.color_edge_rgb,
+                                  color_step=params.color_edge_step)
     within = (neighbours.within(params.band_delta)
               if params.attach_distance > params.band_delta else neighbours)
     dense = density_mask(within, params.band_eta)
