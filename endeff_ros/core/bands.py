@@ -171,8 +171,10 @@ def color_edge_pairs(points: npt.NDArray[np.float64], colors: npt.NDArray[np.flo
     A hand held against the belly touches it: no step along the ray separates the hand's rim
     from the shirt beside it (:func:`steep_pairs` keeps those pairs), but the colours differ.
     The step keeps the pairs of one continuous surface whose colour changes (a pattern, a
-    sleeve's edge seen side-on); a limb pointing at the camera still loses its pairs at a
-    sleeve's edge (docs/results.md), which is why the rule is off by default.
+    sleeve's edge seen side-on). The rule is off by default: a limb pointing at the camera
+    loses its pairs at a sleeve's edge, and a real camera's colour is registered to its
+    depth only roughly, so texture and misregistered edges cut real bodies
+    (docs/design.md, "Colour edges").
     """
     r = np.sqrt(np.einsum('ij,ij->i', points, points))
     along = np.abs(r[j] - r[i])
