@@ -79,8 +79,8 @@ def seen_labels(labels: npt.ArrayLike, depth: npt.NDArray[np.floating], intrinsi
     readings within ``radius`` metres in the (H, W) ``depth`` image (m, NaN or <= 0 = none).
 
     ``intrinsics`` has ``fx, fy, cx, cy``. Only the pixels of a window that holds the sphere's
-    projection are back-projected, so a label costs a few hundred pixels at most; a label
-    behind the camera or projecting outside the image is not seen.
+    projection are back-projected (about 60 x 60 at 2 m with a 525 px focal length); a label
+    that is not finite, lies behind the camera or whose window misses the image is not seen.
     """
     pts = np.asarray(labels, dtype=np.float64).reshape(-1, 3)
     out = np.zeros(len(pts), dtype=bool)
@@ -88,7 +88,7 @@ def seen_labels(labels: npt.ArrayLike, depth: npt.NDArray[np.floating], intrinsi
     fx, fy, cx, cy = (float(intrinsics.fx), float(intrinsics.fy), float(intrinsics.cx),
                       float(intrinsics.cy))
     for i, (x, y, z) in enumerate(pts):
-        if not z > radius:
+        if not (z > radius and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
             continue
         half = int(np.ceil(max(fx, fy) * radius / (z - radius)))
         u, v = fx * x / z + cx, fy * y / z + cy

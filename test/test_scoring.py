@@ -177,8 +177,10 @@ def test_seen_labels_need_readings_near_them() -> None:
                        [-0.5, 0.2, 2.2],    # hidden behind the wall
                        [0.0, 0.0, 2.0],     # in the hole: no reading within 0.1 m
                        [3.0, 0.0, 2.0],     # projects outside the image
-                       [0.0, 0.0, -1.0]])   # behind the camera
-    assert seen_labels(labels, depth, k).tolist() == [True, True, False, False, False, False]
+                       [0.0, 0.0, -1.0],    # behind the camera
+                       [np.inf, 0.0, 2.0]])  # not a position (scoring rejects it later)
+    assert seen_labels(labels, depth, k).tolist() == [True, True, False, False, False, False,
+                                                      False]
     # Near the hole's edge (0.05 m in x at 2 m = 5 px inside it) readings lie within 0.1 m.
     assert seen_labels([[0.15, 0.0, 2.0]], depth, k).tolist() == [True]
     assert seen_labels([[0.15, 0.0, 2.0]], depth, k, radius=0.04).tolist() == [False]
