@@ -301,12 +301,12 @@ class SequenceScorer:
         matched_seen = None if seen is None else seen[score.matches[:, 1]]
         for kind in np.unique(kinds).tolist():
             acc = self.kinds.setdefault(kind, [0, 0, 0.0, 0, 0])
-            hit = matched == kind
-            acc[0] += int(np.count_nonzero(kinds == kind))
+            of_kind, hit = kinds == kind, matched == kind
+            acc[0] += int(np.count_nonzero(of_kind))
             acc[1] += int(np.count_nonzero(hit))
             acc[2] += float(score.errors[hit].sum())
-            if seen is not None and matched_seen is not None:
-                acc[3] += int(np.count_nonzero(seen & (kinds == kind)))
+            if seen is not None and matched_seen is not None:  # both or neither
+                acc[3] += int(np.count_nonzero(seen & of_kind))
                 acc[4] += int(np.count_nonzero(matched_seen & hit))
 
     def kind_result(self) -> dict[str, KindScore]:

@@ -155,10 +155,17 @@ def steep_pairs(points: npt.NDArray[np.float64], i: npt.NDArray[np.intp],
     fraction of a millimetre, and it needs one range per point and 1-D gathers only (a
     fifth of the cost of projecting each pair on its ray).
     """
-    r = np.sqrt(np.einsum('ij,ij->i', points, points))
-    along = np.abs(r[j] - r[i])
+    along = range_steps(points, i, j)
     # along > ratio * across with across^2 = d^2 - along^2, without the square root.
     return (along > min_step) & (along * along * (1.0 + ratio * ratio) > ratio * ratio * d * d)
+
+
+def range_steps(points: npt.NDArray[np.float64], i: npt.NDArray[np.intp],
+                j: npt.NDArray[np.intp]) -> npt.NDArray[np.float64]:
+    """|range(j) - range(i)| of each pair: its step along the viewing ray (:func:`steep_pairs`
+    says why the ranges' difference stands for it)."""
+    r = np.sqrt(np.einsum('ij,ij->i', points, points))
+    return np.abs(r[j] - r[i])
 
 
 def color_edge_pairs(points: npt.NDArray[np.float64], colors: npt.NDArray[np.float64],
@@ -176,9 +183,7 @@ def color_edge_pairs(points: npt.NDArray[np.float64], colors: npt.NDArray[np.flo
     depth only roughly, so texture and misregistered edges cut real bodies
     (docs/design.md, "Colour edges").
     """
-    r = np.sqrt(np.einsum('ij,ij->i', points, points))
-    along = np.abs(r[j] - r[i])
-    step = np.flatnonzero(along > min_step)
+    step = np.flatnonzero(range_steps(points, i, j) > min_step)
     out = np.zeros(len(i), dtype=bool)
     diff = colors[i[step]] - colors[j[step]]
     out[step] = np.einsum('ij,ij->i', diff, diff) > rgb * rgb

@@ -435,7 +435,7 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
         rgb = color[::params.pixel_stride, ::params.pixel_stride][valid][keep]
         cols += tuple(rgb[:, k].astype(np.float64) for k in range(3))
     if params.voxel_size <= 0 or len(cols[0]) == 0:
-        out = np.stack(cols, axis=1).reshape(-1, len(cols))
+        out = np.stack(cols, axis=1)
     else:
         out = _voxel_means(cols, params.voxel_size)
     colors = np.ascontiguousarray(out[:, 3:]) if len(cols) > 3 else None
