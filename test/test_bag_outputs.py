@@ -193,6 +193,31 @@ def test_interrupt_leaves_nothing(tmp_path: Path, sig: int, status: int, jobs: i
     assert not out.exists() or not any(out.iterdir())
 
 
+def test_sigterm_with_an_idle_worker_keeps_the_finished_bag(tmp_path: Path) -> None:
+    """One worker has finished its bag and waits for work when SIGTERM comes: it exits without
+    a traceback, its bag stays complete, the other bag's partial output is removed."""
+    short, long_ = tmp_path / 'in' / 'bag0', tmp_path / 'in' / 'bag1'
+    write_bag(short, BagSpec(frames=3, width=32, height=24, fx=10.0, blob_px=1))
+    write_bag(long_, BagSpec(frames=200, width=32, height=24, fx=10.0, blob_px=1))
+    out = tmp_path / 'out'
+    proc = subprocess.Popen([sys.executable, '-c', _SLOW_RUN.format(test_dir=str(TEST_DIR)),
+                             'process', str(short), str(long_), '-o', str(out), '--jobs', '2'],
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not ((out / 'bag0' / 'metadata.yaml').is_file() and _leftovers(out)) \
+            and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert (out / 'bag0' / 'metadata.yaml').is_file() and _leftovers(out), 'never got there'
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert 'interrupted' in err and 'Traceback' not in err and 'Exception' not in err, err
+    assert _leftovers(tmp_path) == []
+    assert sorted(p.name for p in out.iterdir()) == ['bag0']
+    assert (out / 'bag0' / 'metadata.yaml').is_file()
+
+
 def test_sigkill_leftover_is_removed_by_the_next_run(tmp_path: Path,
                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     import endeff_ros.core.tracker as tracker_mod

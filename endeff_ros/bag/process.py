@@ -352,15 +352,36 @@ def _copy_merged(bag: BagReader, writer: Any, outputs: list[tuple[int, int, Any,
 # Several bags, several processes
 # --------------------------------------------------------------------------------------------
 
+#: In a worker: set by SIGTERM; a job that starts afterwards returns at once.
+_STOPPING = False
+#: In a worker: True while :func:`_job` runs process_bag (whose cleanup the interrupt unwinds).
+_IN_JOB = False
+
+
 def _init_worker(counter: Any) -> None:
     prog.init_worker(counter)
-    # SIGTERM from the parent (or anyone) unwinds like Ctrl-C: process_bag's cleanup runs.
-    signal.signal(signal.SIGTERM, _raise_interrupt)
+    signal.signal(signal.SIGTERM, _worker_sigterm)
+
+
+def _worker_sigterm(signum: int, _frame: Any) -> None:
+    """SIGTERM in a worker: unwind the bag being processed like Ctrl-C (process_bag's cleanup
+    removes its partial output) and take no further bag. A worker waiting for work is not
+    interrupted: an exception there would escape the pool's own loop and kill the worker with
+    a traceback, and the parent could no longer shut the pool down cleanly."""
+    global _STOPPING
+    _STOPPING = True
+    if _IN_JOB:
+        raise _Interrupted(signum)
 
 
 def _job(job: tuple[Any, ...]) -> ProcessResult:
-    """Process one bag; never raises (the error is in the result, naming the bag)."""
+    """Process one bag; never raises but for an interrupt (an error is in the result, naming
+    the bag)."""
+    global _IN_JOB
     in_path, out_path, kwargs = job
+    if _STOPPING:
+        return ProcessResult(str(in_path), str(out_path), error=f'{in_path}: interrupted')
+    _IN_JOB = True
     try:
         return process_bag(in_path, out_path, progress=prog.report, **kwargs)
     except BagError as err:
@@ -371,6 +392,8 @@ def _job(job: tuple[Any, ...]) -> ProcessResult:
         tb = traceback.format_exc(limit=6)
         return ProcessResult(str(in_path), str(out_path),
                              error=f'{in_path}: {type(err).__name__}: {err}\n{tb}')
+    finally:
+        _IN_JOB = False
 
 
 def process_bags(inputs: Sequence[str | Path], output: str | Path, *, jobs: int | None = None,
@@ -412,12 +435,10 @@ def _serial_job(job: tuple[Any, ...], progress: Callable[[int], None]) -> Proces
 
 
 def _stop_workers() -> None:
-    """Interrupted: stop the workers (their SIGTERM handler unwinds process_bag, which removes
-    its partial output)."""
+    """Interrupted: SIGTERM to the workers; each unwinds the bag it is processing (removing its
+    partial output) and takes no other. The pool's shutdown then waits for them to exit."""
     for child in multiprocessing.active_children():
         child.terminate()
-    for child in multiprocessing.active_children():
-        child.join(5.0)
 
 
 def _parallel(job_list: list[tuple[Any, ...]], workers: int, bar: prog.ProgressBar,

@@ -118,7 +118,8 @@ def map_in_workers(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int,
     """``[fn(job) for job in jobs]`` on ``workers`` processes, in job order, while ``bar``
     follows the frames the workers :func:`report`. ``initializer(counter)`` sets a worker up
     (it must call :func:`init_worker`). On any exception (an interrupt) ``on_interrupt()``
-    runs first (e.g. to stop the workers), then the pool is dropped and the exception goes on.
+    runs first (e.g. to stop the workers), then the pool is shut down (jobs not started are
+    cancelled, the workers' current jobs are waited for) and the exception goes on.
     """
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -137,7 +138,10 @@ def map_in_workers(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int,
     except BaseException:
         if on_interrupt is not None:
             on_interrupt()
-        pool.shutdown(wait=False, cancel_futures=True)
+        # Wait for the pool's manager thread: shutdown(wait=False) leaves it running while the
+        # interpreter exits, and the thread can close its wake-up pipe while the exit handler
+        # writes to it ("Exception ignored ... OSError: Bad file descriptor" printed at exit).
+        pool.shutdown(wait=True, cancel_futures=True)
         raise
     pool.shutdown()
     return [f.result() for f in futures]
