@@ -44,7 +44,11 @@ def main(argv: list[str] | None = None) -> int:
     sub = argparse.ArgumentParser(prog=f'endeff {name}', description=SUBCOMMANDS[name][1])
     module.add_arguments(sub)
     args = sub.parse_args(rest)
-    return int(module.run(args) or 0)
+    try:
+        return int(module.run(args) or 0)
+    except KeyboardInterrupt:
+        print(f'endeff {name}: interrupted', file=sys.stderr)
+        return 130
 
 
 if __name__ == '__main__':

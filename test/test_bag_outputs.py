@@ -218,6 +218,46 @@ def test_sigterm_with_an_idle_worker_keeps_the_finished_bag(tmp_path: Path) -> N
     assert (out / 'bag0' / 'metadata.yaml').is_file()
 
 
+def _children(pid: int) -> list[int]:
+    """Child processes of ``pid`` (from /proc: the parent pid is the 4th field of stat)."""
+    kids = []
+    for stat in Path('/proc').glob('[0-9]*/stat'):
+        try:
+            fields = stat.read_text().rsplit(')', 1)[1].split()
+        except OSError:  # the process ended meanwhile
+            continue
+        if int(fields[1]) == pid:
+            kids.append(int(stat.parent.name))
+    return kids
+
+
+@pytest.mark.parametrize('command', ['process', 'eval'])
+def test_ctrl_c_to_the_process_group_stops_every_worker_quietly(tmp_path: Path,
+                                                                command: str) -> None:
+    """Ctrl-C in a terminal reaches the parent and its workers at once: the command ends with
+    status 130 and one line, no traceback from any process, nothing left behind."""
+    ins = [tmp_path / 'in' / f'bag{k}' for k in range(3)]
+    for bag in ins:
+        write_bag(bag, BagSpec(frames=200, width=32, height=24, fx=10.0, blob_px=1))
+    out = tmp_path / ('out' if command == 'process' else 'report.json')
+    args = ['-o', str(out)] if command == 'process' else ['--json', str(out)]
+    proc = subprocess.Popen([sys.executable, '-c', _SLOW_RUN.format(test_dir=str(TEST_DIR)),
+                             command, *map(str, ins), *args, '--jobs', '2'],
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    deadline = time.monotonic() + 60
+    while len(_children(proc.pid)) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert len(_children(proc.pid)) >= 2, 'no workers started'
+    time.sleep(1.0)
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert 'interrupted' in err and 'Traceback' not in err and 'Exception' not in err, err
+    assert _leftovers(tmp_path) == []
+    assert not out.exists() or not any(out.iterdir())
+
+
 def test_sigkill_leftover_is_removed_by_the_next_run(tmp_path: Path,
                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     import endeff_ros.core.tracker as tracker_mod

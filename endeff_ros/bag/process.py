@@ -36,7 +36,6 @@ from __future__ import annotations
 import argparse
 import functools
 import heapq
-import multiprocessing
 import os
 import signal
 import sqlite3
@@ -434,18 +433,11 @@ def _serial_job(job: tuple[Any, ...], progress: Callable[[int], None]) -> Proces
         return ProcessResult(str(in_path), str(out_path), error=f'{in_path}: {err}')
 
 
-def _stop_workers() -> None:
-    """Interrupted: SIGTERM to the workers; each unwinds the bag it is processing (removing its
-    partial output) and takes no other. The pool's shutdown then waits for them to exit."""
-    for child in multiprocessing.active_children():
-        child.terminate()
-
-
 def _parallel(job_list: list[tuple[Any, ...]], workers: int, bar: prog.ProgressBar,
               outs: list[Path]) -> list[ProcessResult]:
     try:
-        return prog.map_in_workers(_job, job_list, workers, bar, initializer=_init_worker,
-                                   on_interrupt=_stop_workers)
+        # On an interrupt the pool SIGTERMs the workers: _worker_sigterm unwinds their bags.
+        return prog.map_in_workers(_job, job_list, workers, bar, initializer=_init_worker)
     except BaseException:
         for o in outs:  # what a worker killed too early left
             sweep_stale_partials(o)

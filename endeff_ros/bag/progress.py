@@ -8,6 +8,7 @@ processes is counted in one shared integer (:func:`shared_counter`, :func:`init_
 
 from __future__ import annotations
 
+import signal
 import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
@@ -100,9 +101,22 @@ def shared_counter(ctx: Any = None) -> Any:
 
 
 def init_worker(counter: Any) -> None:
-    """Pool initializer: :func:`report` in this worker adds to ``counter``."""
+    """Pool initializer: :func:`report` in this worker adds to ``counter``. Ctrl-C (SIGINT to
+    the terminal's whole process group) is left to the parent, which stops the workers
+    (:func:`stop_workers`): a worker interrupted while it waits for work would die with a
+    traceback."""
     global _COUNTER
     _COUNTER = counter
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def stop_workers() -> None:
+    """SIGTERM to this process's children (a pool's workers): by default they end at once; a
+    worker that installed its own handler unwinds its job."""
+    import multiprocessing
+
+    for child in multiprocessing.active_children():
+        child.terminate()
 
 
 def report(n: int = 1) -> None:
@@ -114,12 +128,12 @@ def report(n: int = 1) -> None:
 
 def map_in_workers(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int,
                    bar: ProgressBar, *, initializer: Callable[[Any], None] = init_worker,
-                   on_interrupt: Callable[[], None] | None = None) -> list[Any]:
+                   on_interrupt: Callable[[], None] = stop_workers) -> list[Any]:
     """``[fn(job) for job in jobs]`` on ``workers`` processes, in job order, while ``bar``
     follows the frames the workers :func:`report`. ``initializer(counter)`` sets a worker up
     (it must call :func:`init_worker`). On any exception (an interrupt) ``on_interrupt()``
-    runs first (e.g. to stop the workers), then the pool is shut down (jobs not started are
-    cancelled, the workers' current jobs are waited for) and the exception goes on.
+    stops the workers, then the pool is shut down (jobs not started are cancelled, the
+    workers are waited for) and the exception goes on.
     """
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -136,8 +150,7 @@ def map_in_workers(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int,
             bar.update_to(counter.value)
         bar.update_to(counter.value)
     except BaseException:
-        if on_interrupt is not None:
-            on_interrupt()
+        on_interrupt()
         # Wait for the pool's manager thread: shutdown(wait=False) leaves it running while the
         # interpreter exits, and the thread can close its wake-up pipe while the exit handler
         # writes to it ("Exception ignored ... OSError: Bad file descriptor" printed at exit).
