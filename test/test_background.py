@@ -32,8 +32,8 @@ CHAIR_X, CHAIR_Z = 0.7, 2.2
 DT_NS = 33_333_333
 # The level camera sees little floor in front of the wall (a fifth of the image): more RANSAC
 # hypotheses find it every frame, within the box these scenes are drawn for (x within 1.6 m;
-# in the default 3.5 m the wall leaves the floor too small a share: see
-# test_core_cloud.test_fit_floor_finds_a_floor_that_a_wall_outnumbers).
+# in the default 3.5 m box the wall leaves the floor a tenth of the points, which the local
+# plane hypotheses find: test_core_cloud.test_fit_floor_finds_a_floor_that_a_wall_outnumbers).
 PARAMS = EndeffParams(background_learn_s=0.5, background_absorb_s=1.0, floor_iterations=400,
                       box_min_x=-1.6, box_max_x=1.6)
 
@@ -488,6 +488,10 @@ def _strided(depth: np.ndarray):
     return z, valid, cols, cloud._in_box(*cols, PARAMS)
 
 
+#: The solid angle of one strided pixel of ``K`` (what foreground_cloud gives the floor fit).
+PIXEL_AREA = PARAMS.pixel_stride ** 2 / (K.fx * K.fy)
+
+
 def test_only_a_plane_off_the_learnt_background_means_a_camera_raised_or_lowered(monkeypatch):
     """A (wide) table top is a horizontal plane at another height than the floor, which a
     person close to the camera may leave as the best plane: it is learnt background, at its
@@ -510,16 +514,16 @@ def test_only_a_plane_off_the_learnt_background_means_a_camera_raised_or_lowered
     # Through the whole decision: the floor the lowered camera sees counts ...
     known = FloorPlane(up, 1.1)
     check = functools.partial(cloud._off_background, model, z, valid, cols, keep, PARAMS)
-    moved = cloud._moved_floor(known, cols, keep, PARAMS, check)
+    moved = cloud._moved_floor(known, cols, keep, PARAMS, PIXEL_AREA, check)
     assert moved is not None and abs(moved.offset - 0.8) < 0.03
     # ... the table's plane, the best one with the floor hidden, does not.
     monkeypatch.setattr(sys.modules[__name__], 'CAMERA_HEIGHT', 1.1)
     z, valid, cols, keep = _strided(frame(32, scene).depth)
     above = keep & (table.heights(*cols) > -PARAMS.floor_distance)
-    found = cloud._moved_floor(known, cols, above, PARAMS, lambda plane: True)
+    found = cloud._moved_floor(known, cols, above, PARAMS, PIXEL_AREA, lambda plane: True)
     assert found is not None and abs(found.offset - table.offset) < 0.03
     check = functools.partial(cloud._off_background, model, z, valid, cols, keep, PARAMS)
-    assert cloud._moved_floor(known, cols, above, PARAMS, check) is None
+    assert cloud._moved_floor(known, cols, above, PARAMS, PIXEL_AREA, check) is None
 
 
 def test_a_floor_refit_that_finds_no_plane_is_tried_again(monkeypatch):

@@ -144,14 +144,27 @@ def _in_box(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
 
 def fit_floor(points: npt.NDArray[np.float64], *, distance: float, max_tilt_deg: float,
               min_fraction: float, iterations: int, rng: np.random.Generator | None = None,
-              sample: int = 512) -> FloorPlane | None:
+              sample: int = 512, min_area: float = 0.0,
+              pixel_area: float = 0.0) -> FloorPlane | None:
     """Fit the floor: the near-horizontal plane with the most inliers (vectorised RANSAC).
 
     Only planes whose normal is within ``max_tilt_deg`` of the camera's up axis (-y) are
     hypotheses, so a torso or a wall facing the camera is never taken for the floor, and a
     plane with more than 2 % of the points below it is rejected, so the flat top of a limb or
-    a seat is not either. The winner is refined by least squares on its inliers and accepted
-    only if it holds ``min_fraction`` of the points.
+    a seat is not either. The camera sees a floor from above: a plane less than
+    ``FLOOR_MIN_CLEARANCE_M`` below the camera's centre (or above it) is none. With
+    ``min_area`` and ``pixel_area`` (the solid angle of one of ``points``' pixels,
+    ``(stride / fx) * (stride / fy)``) a floor must also show ``min_area`` square metres (each
+    point standing for its pixel's footprint on the plane): a lap or a seat that the image's
+    lower border cuts has nothing below it either, but shows a tenth of a square metre. The
+    winner is refined by least squares on its inliers and accepted only if it holds
+    ``min_fraction`` of the points.
+
+    Hypotheses: ``iterations`` planes through random triples of points, and as many local
+    planes, each the least-squares plane of a random point's ``_LOCAL_NEIGHBOURS`` nearest
+    sample points. A random triple lies on a floor that holds a fraction f of the points
+    with probability f^3 (a tenth of the points: one triple in a thousand, so 40 triples
+    miss it), a random point with probability f.
 
     Everything runs on an evenly strided subsample of ``sample`` to ``2 * sample`` points
     (the points come in pixel order, so a stride spreads the sample over the image): the
@@ -169,6 +182,8 @@ def fit_floor(points: npt.NDArray[np.float64], *, distance: float, max_tilt_deg:
     else:
         idx = rng.integers(0, len(sub), size=(iterations, 3))
     normals, p0 = _plane_hypotheses(sub, idx)
+    local_normals, local_p0 = _local_plane_hypotheses(sub, idx[:, 0])
+    normals, p0 = np.concatenate([normals, local_normals]), np.concatenate([p0, local_p0])
     # Orient every normal upwards (optical frame: up is -y).
     normals *= np.where(normals[:, 1] > 0, -1.0, 1.0)[:, None]
     cos_tilt = math.cos(math.radians(max_tilt_deg))
@@ -176,20 +191,56 @@ def fit_floor(points: npt.NDArray[np.float64], *, distance: float, max_tilt_deg:
     if not np.any(keep):
         return None
     normals, p0 = normals[keep], p0[keep]
-    offsets = -np.einsum('ij,ij->i', normals, p0)
+    offsets = -np.einsum('ij,ij->i', normals, p0)  # the camera's height above each plane
     heights = sub @ normals.T + offsets  # (S, H)
     on_plane = np.abs(heights) < distance
     counts = np.count_nonzero(on_plane, axis=0)
     # A floor has (almost) nothing below it: this rejects the flat top of a limb or a seat.
     below = np.count_nonzero(heights < -3 * distance, axis=0)
     counts[below > 0.02 * len(sub)] = 0
-    best = int(np.argmax(counts))
-    if counts[best] < max(3, min_fraction * len(sub)):
+    counts[offsets < FLOOR_MIN_CLEARANCE_M] = 0
+    enough = max(3, min_fraction * len(sub))
+    for best in np.argsort(-counts, kind='stable'):
+        if counts[best] < enough:
+            return None
+        if min_area <= 0 or pixel_area <= 0:
+            break
+        on = sub[on_plane[:, best]]
+        if _footprints(on, normals[best], pixel_area * n / len(sub)).sum() >= min_area:
+            break
+    else:
         return None
     normal, offset = _refine_plane(sub[on_plane[:, best]], normals[best])
-    if -normal[1] < cos_tilt:
+    if -normal[1] < cos_tilt or offset < FLOOR_MIN_CLEARANCE_M:
         return None
     return FloorPlane(normal, offset)
+
+
+def _local_plane_hypotheses(points: npt.NDArray[np.float64], seeds: npt.NDArray[np.int64],
+                            ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Unit normals and centres of the least-squares planes of each seed's
+    ``_LOCAL_NEIGHBOURS`` nearest ``points`` (a batched eigen-decomposition)."""
+    from scipy.spatial import cKDTree
+
+    k = min(_LOCAL_NEIGHBOURS, len(points))
+    _, near = cKDTree(points).query(points[seeds], k=k)
+    patch = points[near.reshape(len(seeds), k)]
+    centres = patch.mean(axis=1)
+    d = patch - centres[:, None]
+    normals = np.linalg.eigh(np.einsum('hki,hkj->hij', d, d))[1][:, :, 0]
+    return normals, centres
+
+
+#: Sample points whose least-squares plane is one local floor hypothesis (see
+#: :func:`fit_floor`): on a 512-1024 point sample of the box, a patch some 10-30 cm across
+#: (larger patches reached over walls and legs on a hall's floor 3-5 m away; 8 and 12 gave
+#: the mocap dev subset the same scores: docs/design.md, "Floor hypotheses").
+_LOCAL_NEIGHBOURS = 6
+#: A floor shows at least this area inside the box (square metres; see :func:`fit_floor`).
+FLOOR_MIN_AREA_M2 = 0.5
+#: A floor lies at least this far below the camera's centre (metres): a camera looks at a
+#: floor from above, and a plane through the camera is the fan of rays along an image border.
+FLOOR_MIN_CLEARANCE_M = 0.1
 
 
 @functools.lru_cache(maxsize=8)
@@ -298,19 +349,21 @@ def _voxel_means(cols: Sequence[npt.NDArray[np.float64]],
     return out
 
 
-def _fit_inside(cols: Columns, keep: npt.NDArray[np.bool_],
-               params: EndeffParams) -> FloorPlane | None:
-    """:func:`fit_floor` on a sample of the points ``keep`` (inside the box)."""
+def _fit_inside(cols: Columns, keep: npt.NDArray[np.bool_], params: EndeffParams,
+                pixel_area: float) -> FloorPlane | None:
+    """:func:`fit_floor` on a sample of the points ``keep`` (inside the box); ``pixel_area``:
+    the solid angle of one of their pixels."""
     inside = np.flatnonzero(keep)
-    inside = inside[::max(1, len(inside) // _FLOOR_SAMPLE)]
-    return fit_floor(np.stack([c[inside] for c in cols], axis=1),
+    step = max(1, len(inside) // _FLOOR_SAMPLE)
+    return fit_floor(np.stack([c[inside[::step]] for c in cols], axis=1),
                      distance=params.floor_distance, max_tilt_deg=params.floor_max_tilt_deg,
                      min_fraction=params.floor_min_fraction,
-                     iterations=params.floor_iterations, sample=_FLOOR_SAMPLE)
+                     iterations=params.floor_iterations, sample=_FLOOR_SAMPLE,
+                     min_area=FLOOR_MIN_AREA_M2, pixel_area=pixel_area * step)
 
 
 def _moved_floor(floor: FloorPlane, cols: Columns, keep: npt.NDArray[np.bool_],
-                 params: EndeffParams,
+                 params: EndeffParams, pixel_area: float,
                  off_background: Callable[[FloorPlane], bool] | None = None,
                  ) -> FloorPlane | None:
     """The floor this frame shows, when the known ``floor`` no longer explains it because
@@ -335,7 +388,7 @@ def _moved_floor(floor: FloorPlane, cols: Columns, keep: npt.NDArray[np.bool_],
       floor: those are learnt background, at the depths they always had; a floor seen
       from another height is not.
     """
-    fitted = _fit_inside(cols, keep, params)
+    fitted = _fit_inside(cols, keep, params, pixel_area)
     if fitted is None:
         return None
     cos = float(np.clip(fitted.normal @ floor.normal, -1.0, 1.0))
@@ -391,9 +444,10 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
     x, y, z = _columns(z_image, valid, intrinsics, params.pixel_stride)
     keep = _in_box(x, y, z, params)
     if params.floor_removal:
+        pixel_area = params.pixel_stride ** 2 / (intrinsics.fx * intrinsics.fy)
         known = floor is not None
         if floor is None or floor.refit:
-            fitted = _fit_inside((x, y, z), keep, params)
+            fitted = _fit_inside((x, y, z), keep, params, pixel_area)
             if fitted is not None:
                 floor, known = fitted, False
             else:  # none found: the old plane (better than none), fitted again next frame
@@ -407,7 +461,7 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
                 if len(near) < params.floor_min_fraction * n_inside:
                     off = None if background is None else functools.partial(
                         _off_background, background, z_image, valid, (x, y, z), keep, params)
-                    moved = _moved_floor(floor, (x, y, z), keep, params, off)
+                    moved = _moved_floor(floor, (x, y, z), keep, params, pixel_area, off)
                 if moved is not None:  # the camera moved (see _moved_floor)
                     floor = moved
                     height = floor.heights(x, y, z)

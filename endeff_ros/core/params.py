@@ -56,7 +56,9 @@ class EndeffParams:
                                    unit='deg', lo=0.0, hi=90.0)
     floor_min_fraction: float = _p(0.05, 'A floor must hold at least this fraction of points.',
                                    lo=0.0, hi=1.0)
-    floor_iterations: int = _p(40, 'RANSAC hypotheses for the floor plane.', lo=1, hi=10000)
+    floor_iterations: int = _p(40, 'RANSAC hypotheses for the floor plane: as many planes '
+                               'through random triples of points and as many local planes '
+                               'around random points.', lo=1, hi=10000)
     wall_min_area: float = _p(1.0, 'Planes of any orientation that show at least this area '
                               'inside the box (walls, a wall behind a person) are not entities '
                               'and are dropped with the floor; 0 = off.', unit='m^2', lo=0.0,
