@@ -53,3 +53,41 @@ def test_count_frames_and_shared_counter(tmp_path: Path) -> None:
     finally:
         progress.init_worker(None)
     assert counter.value == 3
+
+
+def _nap(seconds: float) -> float:
+    import time
+
+    time.sleep(seconds)
+    return seconds
+
+
+class _InterruptedBar(progress.ProgressBar):
+    """A bar whose first update raises KeyboardInterrupt, as Ctrl-C in the parent would."""
+
+    def __init__(self) -> None:
+        super().__init__(0, enabled=False)
+
+    def update_to(self, done: int) -> None:
+        raise KeyboardInterrupt
+
+
+def test_an_interrupt_stops_the_pool_but_not_the_callers_own_children() -> None:
+    import multiprocessing
+    import time
+
+    own = multiprocessing.get_context().Process(target=_nap, args=(30.0,))
+    own.start()
+    try:
+        start = time.monotonic()
+        with pytest.raises(KeyboardInterrupt):
+            progress.map_in_workers(_nap, [30.0, 30.0], 2, _InterruptedBar())
+        # The workers were stopped (not waited for through their 30 s jobs) ...
+        assert time.monotonic() - start < 20
+        assert [c for c in multiprocessing.active_children() if c is not own] == []
+        # ... and the caller's own process still runs (a SIGTERM would end it within 1 s).
+        own.join(1.0)
+        assert own.is_alive()
+    finally:
+        own.terminate()
+        own.join()

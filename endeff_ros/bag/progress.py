@@ -103,20 +103,11 @@ def shared_counter(ctx: Any = None) -> Any:
 def init_worker(counter: Any) -> None:
     """Pool initializer: :func:`report` in this worker adds to ``counter``. Ctrl-C (SIGINT to
     the terminal's whole process group) is left to the parent, which stops the workers
-    (:func:`stop_workers`): a worker interrupted while it waits for work would die with a
+    (:func:`map_in_workers`): a worker interrupted while it waits for work would die with a
     traceback."""
     global _COUNTER
     _COUNTER = counter
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def stop_workers() -> None:
-    """SIGTERM to this process's children (a pool's workers): by default they end at once; a
-    worker that installed its own handler unwinds its job."""
-    import multiprocessing
-
-    for child in multiprocessing.active_children():
-        child.terminate()
 
 
 def report(n: int = 1) -> None:
@@ -127,17 +118,20 @@ def report(n: int = 1) -> None:
 
 
 def map_in_workers(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int,
-                   bar: ProgressBar, *, initializer: Callable[[Any], None] = init_worker,
-                   on_interrupt: Callable[[], None] = stop_workers) -> list[Any]:
+                   bar: ProgressBar, *,
+                   initializer: Callable[[Any], None] = init_worker) -> list[Any]:
     """``[fn(job) for job in jobs]`` on ``workers`` processes, in job order, while ``bar``
     follows the frames the workers :func:`report`. ``initializer(counter)`` sets a worker up
-    (it must call :func:`init_worker`). On any exception (an interrupt) ``on_interrupt()``
-    stops the workers, then the pool is shut down (jobs not started are cancelled, the
-    workers are waited for) and the exception goes on.
+    (it must call :func:`init_worker`). On any exception (an interrupt) the pool's workers
+    get SIGTERM (by default they end at once; a worker that installed its own handler
+    unwinds its job), the pool is shut down (jobs not started are cancelled, the workers are
+    waited for) and the exception goes on.
     """
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
+    # The caller's own child processes, which an interrupt must leave alone.
+    others = {child.pid for child in multiprocessing.active_children()}
     ctx = multiprocessing.get_context()
     counter = shared_counter(ctx)
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=initializer,
@@ -150,7 +144,9 @@ def map_in_workers(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int,
             bar.update_to(counter.value)
         bar.update_to(counter.value)
     except BaseException:
-        on_interrupt()
+        for child in multiprocessing.active_children():
+            if child.pid not in others:
+                child.terminate()
         # Wait for the pool's manager thread: shutdown(wait=False) leaves it running while the
         # interpreter exits, and the thread can close its wake-up pipe while the exit handler
         # writes to it ("Exception ignored ... OSError: Bad file descriptor" printed at exit).
