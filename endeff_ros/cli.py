@@ -10,7 +10,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
+import threading
+from typing import Any
+
+from endeff_ros.cli_common import Terminated, raise_terminated
 
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'synth': ('endeff_ros.synth.cli', 'Generate synthetic RGB-D benchmark bags.'),
@@ -44,11 +49,24 @@ def main(argv: list[str] | None = None) -> int:
     sub = argparse.ArgumentParser(prog=f'endeff {name}', description=SUBCOMMANDS[name][1])
     module.add_arguments(sub)
     args = sub.parse_args(rest)
+    # SIGTERM (a `timeout`, a supervisor) unwinds like Ctrl-C: a command's workers are
+    # stopped and its partial outputs removed, instead of the process dying around them.
+    previous = _on_sigterm(raise_terminated)
     try:
         return int(module.run(args) or 0)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as err:
         print(f'endeff {name}: interrupted', file=sys.stderr)
-        return 130
+        return 143 if isinstance(err, Terminated) else 130
+    finally:
+        _on_sigterm(previous)
+
+
+def _on_sigterm(handler: Any) -> Any:
+    """Install ``handler`` for SIGTERM and return the previous one; None where no handler can
+    be installed (not the main thread) or ``handler`` is None."""
+    if handler is None or threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, handler)
 
 
 if __name__ == '__main__':

@@ -11,6 +11,16 @@ import sys
 from typing import Any
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised (by :func:`raise_terminated`) where the main thread runs, so that the
+    same cleanup as for Ctrl-C's KeyboardInterrupt runs; exit status 143 instead of 130."""
+
+
+def raise_terminated(signum: int, _frame: Any) -> None:
+    """A SIGTERM handler: raise :class:`Terminated`."""
+    raise Terminated(signum)
+
+
 def print_json(data: Any, path: str | None = None) -> None:
     """Print ``data`` as indented JSON; also write it to ``path`` when given."""
     text = json.dumps(data, indent=2, default=float)

@@ -258,6 +258,28 @@ def test_ctrl_c_to_the_process_group_stops_every_worker_quietly(tmp_path: Path,
     assert not out.exists() or not any(out.iterdir())
 
 
+def test_sigterm_to_eval_stops_its_workers(tmp_path: Path) -> None:
+    """`endeff eval --jobs 2` told to terminate (a `timeout`, a supervisor) ends with one line
+    and status 143, and takes its workers with it: none is left running on its own."""
+    ins = [tmp_path / 'in' / f'bag{k}' for k in range(3)]
+    for bag in ins:
+        write_bag(bag, BagSpec(frames=200, width=32, height=24, fx=10.0, blob_px=1))
+    proc = subprocess.Popen([sys.executable, '-c', _SLOW_RUN.format(test_dir=str(TEST_DIR)),
+                             'eval', *map(str, ins), '--jobs', '2'],
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while len(_children(proc.pid)) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    workers = _children(proc.pid)
+    assert len(workers) >= 2, 'no workers started'
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert 'interrupted' in err and 'Traceback' not in err, err
+    assert not [pid for pid in workers if Path(f'/proc/{pid}').exists()]
+
+
 def test_sigkill_leftover_is_removed_by_the_next_run(tmp_path: Path,
                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     import endeff_ros.core.tracker as tracker_mod

@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from endeff_ros.cli_common import load_params_option
+from endeff_ros.cli_common import Terminated, load_params_option, raise_terminated
 from endeff_ros.core.errors import EndeffError, InputError
 
 from . import progress as prog
@@ -370,7 +370,7 @@ def _worker_sigterm(signum: int, _frame: Any) -> None:
     global _STOPPING
     _STOPPING = True
     if _IN_JOB:
-        raise _Interrupted(signum)
+        raise Terminated(signum)
 
 
 def _job(job: tuple[Any, ...]) -> ProcessResult:
@@ -444,14 +444,6 @@ def _parallel(job_list: list[tuple[Any, ...]], workers: int, bar: prog.ProgressB
         raise
 
 
-class _Interrupted(KeyboardInterrupt):
-    """SIGTERM, raised where the main thread runs so that cleanup code executes."""
-
-
-def _raise_interrupt(signum: int, _frame: Any) -> None:
-    raise _Interrupted(signum)
-
-
 def run(args: argparse.Namespace) -> int:
     """``endeff process``: 0 if every bag was processed, 1 if any failed, 2 on bad options
     or outputs (reported before any bag is read), 130 / 143 when interrupted."""
@@ -469,7 +461,7 @@ def run(args: argparse.Namespace) -> int:
         print(f'endeff process: {line}', file=sys.stderr)
     if problems:
         return 2
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    previous = signal.signal(signal.SIGTERM, raise_terminated)
     try:
         results = process_bags(inputs, args.output, jobs=args.jobs, params=params,
                                options=options_from_args(args), storage=args.storage,
@@ -480,7 +472,7 @@ def run(args: argparse.Namespace) -> int:
             sweep_stale_partials(o, include_own=True)
         print('endeff process: interrupted; outputs not finished were removed (finished ones '
               'are complete bags)', file=sys.stderr)
-        return 143 if isinstance(err, _Interrupted) else 130
+        return 143 if isinstance(err, Terminated) else 130
     finally:
         signal.signal(signal.SIGTERM, previous)
     failed = 0
