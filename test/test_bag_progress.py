@@ -81,8 +81,8 @@ def test_an_interrupt_stops_the_pool_but_not_the_callers_own_children() -> None:
     try:
         start = time.monotonic()
         with pytest.raises(KeyboardInterrupt):
-            progress.map_in_workers(_nap, [30.0, 30.0], 2, _InterruptedBar())
-        # The workers were stopped (not waited for through their 30 s jobs) ...
+            progress.map_in_workers(_nap, [30.0] * 5, 2, _InterruptedBar())
+        # The workers were stopped, not waited for through their 30 s jobs and the queued ones ...
         assert time.monotonic() - start < 20
         assert [c for c in multiprocessing.active_children() if c is not own] == []
         # ... and the caller's own process still runs (a SIGTERM would end it within 1 s).

@@ -8,10 +8,11 @@ processes is counted in one shared integer (:func:`shared_counter`, :func:`init_
 
 from __future__ import annotations
 
-import signal
 import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
+
+from endeff_ros.workers import ignore_sigint, process_pool
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
@@ -107,7 +108,7 @@ def init_worker(counter: Any) -> None:
     traceback."""
     global _COUNTER
     _COUNTER = counter
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    ignore_sigint()
 
 
 def report(n: int = 1) -> None:
@@ -128,29 +129,16 @@ def map_in_workers(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int,
     waited for) and the exception goes on.
     """
     import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures import FIRST_COMPLETED, wait
 
-    # The caller's own child processes, which an interrupt must leave alone.
-    others = {child.pid for child in multiprocessing.active_children()}
     ctx = multiprocessing.get_context()
     counter = shared_counter(ctx)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=initializer,
-                               initargs=(counter,))
-    try:
+    with process_pool(workers, mp_context=ctx, initializer=initializer,
+                      initargs=(counter,)) as pool:
         futures = [pool.submit(fn, j) for j in jobs]
         pending = set(futures)
         while pending:
             _, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
             bar.update_to(counter.value)
         bar.update_to(counter.value)
-    except BaseException:
-        for child in multiprocessing.active_children():
-            if child.pid not in others:
-                child.terminate()
-        # Wait for the pool's manager thread: shutdown(wait=False) leaves it running while the
-        # interpreter exits, and the thread can close its wake-up pipe while the exit handler
-        # writes to it ("Exception ignored ... OSError: Bad file descriptor" printed at exit).
-        pool.shutdown(wait=True, cancel_futures=True)
-        raise
-    pool.shutdown()
     return [f.result() for f in futures]

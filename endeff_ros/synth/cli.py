@@ -18,9 +18,10 @@ import json
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 from pathlib import Path
+
+from endeff_ros.workers import process_pool
 
 from .sequences import GROUPS, SEQUENCES, SPECS
 
@@ -89,7 +90,7 @@ def generate(out: Path, names: list[str], storages: list[str], *, quick: bool = 
     # Longest sequences first so the workers finish together; spawned workers (no fork of a
     # possibly multi-threaded caller).
     order = sorted(names, key=lambda n: -SPECS[n].frames)
-    with ProcessPoolExecutor(jobs, mp_context=get_context('spawn')) as pool:
+    with process_pool(jobs, mp_context=get_context('spawn')) as pool:
         futs = {n: pool.submit(generate_one, n, out, storages, quick, seed) for n in order}
         return {n: futs[n].result() for n in names}
 
@@ -174,7 +175,7 @@ def run_mocap(args: argparse.Namespace, storages: list[str]) -> int:
                 failed[s.name] = f'{type(exc).__name__}: {exc}'
     else:
         order = sorted(specs, key=lambda s: -s.frames * len(s.people))
-        with ProcessPoolExecutor(jobs, mp_context=get_context('spawn')) as pool:
+        with process_pool(jobs, mp_context=get_context('spawn')) as pool:
             futs = {}
             for s in order:
                 need = {p.clip: byname[p.clip] for p in s.people}
