@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import pytest
 from bag_helpers import BagSpec, FakeTracker, storage_file, write_bag
@@ -231,25 +232,35 @@ def _children(pid: int) -> list[int]:
     return kids
 
 
+def _started_with_workers(tmp_path: Path, command: str, args: list[str],
+                          **popen: Any) -> tuple[subprocess.Popen[str], list[int]]:
+    """``endeff COMMAND`` on three slow bags with ``--jobs 2`` (and ``args``), once its two
+    workers have run for a second: the process and its workers' pids."""
+    ins = [tmp_path / 'in' / f'bag{k}' for k in range(3)]
+    for bag in ins:
+        write_bag(bag, BagSpec(frames=200, width=32, height=24, fx=10.0, blob_px=1))
+    proc = subprocess.Popen([sys.executable, '-c', _SLOW_RUN.format(test_dir=str(TEST_DIR)),
+                             command, *map(str, ins), *args, '--jobs', '2'],
+                            stderr=subprocess.PIPE, text=True, **popen)
+    deadline = time.monotonic() + 60
+    while len(_children(proc.pid)) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    workers = _children(proc.pid)
+    assert len(workers) >= 2, 'no workers started'
+    time.sleep(1.0)
+    return proc, workers
+
+
 @pytest.mark.parametrize('command', ['process', 'eval'])
 def test_ctrl_c_to_the_process_group_stops_every_worker_quietly(tmp_path: Path,
                                                                 command: str) -> None:
     """Ctrl-C in a terminal reaches the parent and its workers at once: the command ends with
     status 130 and one line, no traceback from any process, nothing left behind."""
-    ins = [tmp_path / 'in' / f'bag{k}' for k in range(3)]
-    for bag in ins:
-        write_bag(bag, BagSpec(frames=200, width=32, height=24, fx=10.0, blob_px=1))
     out = tmp_path / ('out' if command == 'process' else 'report.json')
     args = ['-o', str(out)] if command == 'process' else ['--json', str(out)]
-    proc = subprocess.Popen([sys.executable, '-c', _SLOW_RUN.format(test_dir=str(TEST_DIR)),
-                             command, *map(str, ins), *args, '--jobs', '2'],
-                            stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    deadline = time.monotonic() + 60
-    while len(_children(proc.pid)) < 2 and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert len(_children(proc.pid)) >= 2, 'no workers started'
-    time.sleep(1.0)
+    proc, _ = _started_with_workers(
+        tmp_path, command, args, start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     os.killpg(proc.pid, signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
@@ -261,18 +272,7 @@ def test_ctrl_c_to_the_process_group_stops_every_worker_quietly(tmp_path: Path,
 def test_sigterm_to_eval_stops_its_workers(tmp_path: Path) -> None:
     """`endeff eval --jobs 2` told to terminate (a `timeout`, a supervisor) ends with one line
     and status 143, and takes its workers with it: none is left running on its own."""
-    ins = [tmp_path / 'in' / f'bag{k}' for k in range(3)]
-    for bag in ins:
-        write_bag(bag, BagSpec(frames=200, width=32, height=24, fx=10.0, blob_px=1))
-    proc = subprocess.Popen([sys.executable, '-c', _SLOW_RUN.format(test_dir=str(TEST_DIR)),
-                             'eval', *map(str, ins), '--jobs', '2'],
-                            stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 60
-    while len(_children(proc.pid)) < 2 and time.monotonic() < deadline:
-        time.sleep(0.05)
-    workers = _children(proc.pid)
-    assert len(workers) >= 2, 'no workers started'
-    time.sleep(1.0)
+    proc, workers = _started_with_workers(tmp_path, 'eval', [])
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, err

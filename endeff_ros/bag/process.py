@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from endeff_ros.cli_common import Terminated, load_params_option, raise_terminated
+from endeff_ros.cli_common import Terminated, load_params_option
 from endeff_ros.core.errors import EndeffError, InputError
 
 from . import progress as prog
@@ -401,8 +401,9 @@ def process_bags(inputs: Sequence[str | Path], output: str | Path, *, jobs: int 
 
     ``kwargs`` go to :func:`process_bag` (``params``, ``options``, ``storage``, ``force``,
     ``copy_input``, ``markers``, ``marker_lifetime_s``, ``tracker_factory``; the factory must be
-    picklable). An interrupt (KeyboardInterrupt, also raised for SIGTERM by :func:`run`) stops
-    the workers, removes their unfinished outputs and propagates.
+    picklable). An interrupt (KeyboardInterrupt; ``endeff`` raises its subclass
+    ``Terminated`` for SIGTERM) stops the workers, removes their unfinished outputs and
+    propagates.
     """
     try:
         outs = output_paths(inputs, output)
@@ -461,7 +462,8 @@ def run(args: argparse.Namespace) -> int:
         print(f'endeff process: {line}', file=sys.stderr)
     if problems:
         return 2
-    previous = signal.signal(signal.SIGTERM, raise_terminated)
+    # SIGTERM raises Terminated here: endeff_ros.cli.main installs the handler for every
+    # subcommand.
     try:
         results = process_bags(inputs, args.output, jobs=args.jobs, params=params,
                                options=options_from_args(args), storage=args.storage,
@@ -473,8 +475,6 @@ def run(args: argparse.Namespace) -> int:
         print('endeff process: interrupted; outputs not finished were removed (finished ones '
               'are complete bags)', file=sys.stderr)
         return 143 if isinstance(err, Terminated) else 130
-    finally:
-        signal.signal(signal.SIGTERM, previous)
     failed = 0
     for r in results:
         if r.error:
