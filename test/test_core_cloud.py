@@ -214,8 +214,8 @@ def test_foreground_cloud_removes_the_tilted_floor_and_reports_it():
     # The box ends before the scene's back wall (5.5 m away), which the pitched camera sees
     # nearer than the default box's far face: only the floor rule is under test here.
     params = EndeffParams(box_max_z=4.3)
-    points, floor, _ = foreground_cloud(scenes.shoot(person, camera).frame.depth, KINECT_640,
-                                        params)
+    points, floor, *_ = foreground_cloud(scenes.shoot(person, camera).frame.depth, KINECT_640,
+                                         params)
     assert floor is not None
     assert _angle_deg(floor.normal, up(camera)) < 1.0
     assert np.all(floor.distance(points) > params.floor_distance - 1e-9)

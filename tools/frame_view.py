@@ -5,8 +5,8 @@ tracks are those of ``endeff eval``) up to ``--frame``; that frame is drawn over
 image (near = bright):
 
 - the foreground points, coloured by sub-band (Section 4.1; points no band reached: grey;
-  sub-bands cut by the image border or the foreground box, whose extremes are dropped as no
-  ends (``drop_cut_ends``): white);
+  sub-bands cut by the image border, the foreground box or a dropped table top, whose
+  extremes are dropped as no ends (``drop_cut_ends``): white);
 - each candidate's geodesic path to its entity's root (Section 4.2), a white line, and the
   candidate (the single-frame estimator's end-effector) as a red ring;
 - the tracker's published end-effectors with their ids (:func:`draw_tracks`: filled when
@@ -80,7 +80,8 @@ def _cut(frame: RGBDFrame, result: TrackerResult,
          params: EndeffParams | None) -> npt.NDArray[np.intp]:
     """The frame's cut sub-bands (:func:`cut_nodes`)."""
     est = result.estimate
-    return cut_nodes(est.points, est.subband, frame.intrinsics, params or EndeffParams())
+    return cut_nodes(est.points, est.subband, frame.intrinsics, params or EndeffParams(),
+                     est.cut)
 
 
 def draw(frame: RGBDFrame, truth: npt.NDArray[np.float64], result: TrackerResult,

@@ -421,6 +421,9 @@ class ForegroundCloud(NamedTuple):
     #: (N, 3) mean colour (0-255 RGB) of each point's pixels, when the colour image was given
     #: and ``color_edge_rgb`` asks for it; else None.
     colors: npt.NDArray[np.float64] | None = None
+    #: (N,) whether each point lies beside a table top that was dropped (the table hid what
+    #: lies beyond: :func:`beside_dropped`), or None when none was.
+    cut: npt.NDArray[np.bool_] | None = None
 
 
 def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
@@ -472,6 +475,12 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
             keep &= height > params.floor_distance
     if params.wall_min_area > 0:
         keep &= ~wall_points(x, y, z, keep, valid, intrinsics, params)
+    beside = None
+    if params.table_min_area > 0 and params.floor_removal and floor is not None:
+        level = level_surface_points((x, y, z), height, keep, valid, floor.normal, params)
+        if level.any():
+            keep &= ~level
+            beside = beside_dropped(z_image, valid, level, keep)
     if background is not None:
         # The model sees every reading of the strided image (walls beyond the box included:
         # a person in front of them changed those pixels), and the box and floor as a mask.
@@ -485,15 +494,36 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
         keep = background.foreground(z_image, candidate, stamp_ns, params, low=low,
                                      color=color)[valid]
     cols: tuple[npt.NDArray[np.float64], ...] = (x[keep], y[keep], z[keep])
-    if color is not None and params.color_edge_rgb > 0:
+    with_rgb = color is not None and params.color_edge_rgb > 0
+    if with_rgb:
         rgb = color[::params.pixel_stride, ::params.pixel_stride][valid][keep]
         cols += tuple(rgb[:, k].astype(np.float64) for k in range(3))
+    if beside is not None:
+        cols += (beside[keep].astype(np.float64),)  # a voxel is beside if any pixel is
     if params.voxel_size <= 0 or len(cols[0]) == 0:
         out = np.stack(cols, axis=1)
     else:
         out = _voxel_means(cols, params.voxel_size)
-    colors = np.ascontiguousarray(out[:, 3:]) if len(cols) > 3 else None
-    return ForegroundCloud(np.ascontiguousarray(out[:, :3]), floor, colors)
+    colors = np.ascontiguousarray(out[:, 3:6]) if with_rgb else None
+    cut = out[:, -1] > 0 if beside is not None else None
+    return ForegroundCloud(np.ascontiguousarray(out[:, :3]), floor, colors, cut)
+
+
+def beside_dropped(z_image: npt.NDArray[np.floating], valid: npt.NDArray[np.bool_],
+                   dropped: npt.NDArray[np.bool_], keep: npt.NDArray[np.bool_]
+                   ) -> npt.NDArray[np.bool_]:
+    """Points of ``keep`` whose pixel lies within ``_BESIDE_PX`` strided pixels of a
+    ``dropped`` point's pixel and not nearer than those by more than ``_BESIDE_STEP``: the
+    table top hides what lies beyond it, so a body seen over it (or below its front edge)
+    ends there, and that end is a cut, like the image border's; a body in front of the table
+    is not cut by it. ``z_image`` (H, W) the strided depth, ``valid`` its pixels that became
+    the points (in order); ``dropped`` and ``keep`` per point."""
+    size = 2 * _BESIDE_PX + 1
+    z = z_image[valid].astype(np.float32)
+    image = np.full(valid.shape, np.inf, dtype=np.float32)
+    image[valid] = np.where(dropped, z, np.inf)
+    nearest = cv2.erode(image, np.ones((size, size), np.uint8))[valid]
+    return keep & (z >= nearest - _BESIDE_STEP)
 
 
 def wall_points(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
@@ -568,6 +598,68 @@ def wall_points(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
     return out
 
 
+def level_surface_points(cols: Columns, height: npt.NDArray[np.float64],
+                         keep: npt.NDArray[np.bool_], valid: npt.NDArray[np.bool_],
+                         up: npt.NDArray[np.float64], params: EndeffParams
+                         ) -> npt.NDArray[np.bool_]:
+    """Points of ``keep`` on level surfaces above the floor that cover at least
+    ``params.table_min_area`` square metres less a rim: table tops and desks. A person behind
+    or at a table joins it in one entity (the static background keeps what a moving part
+    joins), and its corners and edges are then extremes; they are no wall (a table shows less
+    than ``wall_min_area``, and the walls' two planes are taken first).
+
+    The floor gives the surfaces' normal, so a level is a peak of the points' ``height``
+    (above the floor, aligned with the points ``cols``): for each of the ``_LEVELS`` densest
+    levels at least ``_LEVEL_MIN_HEIGHT`` up, the points within ``floor_distance`` plus the
+    depth noise's ``0.005 z^2`` of it, per 8-connected stretch of their pixels (``valid``,
+    the strided image's pixels that became the points), are projected onto the level and
+    counted in ``_WALL_CELL`` cells. The occupied cells are eroded by one cell: a level slab
+    through upright things (a body, a wall, a shelf's side) projects to a thin curve, which
+    goes, while a table top keeps its inside. A stretch whose inside covers the area goes,
+    with the points in or beside (one cell) that inside; ``up`` is the floor's normal.
+    """
+    out = np.zeros(len(height), dtype=bool)
+    idx = np.flatnonzero(keep & (height > _LEVEL_MIN_HEIGHT))
+    if len(idx) < _LEVEL_MIN_POINTS:
+        return out
+    h = height[idx]
+    step = params.floor_distance
+    edges = np.arange(_LEVEL_MIN_HEIGHT, float(h.max()) + 2 * step, step)
+    counts = np.histogram(h, edges)[0]
+    window = counts[:-1] + counts[1:]  # points within two bins: a level between two edges
+    x, y, z = (c[idx] for c in cols)
+    tol = step + _WALL_NOISE_Z2 * z ** 2
+    helper = np.array([1.0, 0.0, 0.0]) if abs(up[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(up, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(up, e1)
+    u, v = ((x * e[0] + y * e[1] + z * e[2]) / _WALL_CELL for e in (e1, e2))
+    pixel_of = np.flatnonzero(valid)[idx]
+    kernel = np.ones((3, 3), np.uint8)
+    for _ in range(_LEVELS):
+        b = int(np.argmax(window)) if len(window) else 0
+        if not len(window) or window[b] < _LEVEL_MIN_POINTS:
+            break
+        window[max(0, b - 2):b + 3] = 0  # the next level is another surface
+        in_bins = (h >= edges[b]) & (h < edges[b + 2])
+        on = np.flatnonzero(np.abs(h - np.median(h[in_bins])) < tol)
+        image = np.zeros(valid.shape, dtype=np.uint8)
+        image.reshape(-1)[pixel_of[on]] = 1
+        n, labels = cv2.connectedComponents(image, connectivity=8, ltype=cv2.CV_32S)
+        part = labels.reshape(-1)[pixel_of[on]]
+        min_cells = params.table_min_area / _WALL_CELL ** 2
+        for label in np.flatnonzero(np.bincount(part, minlength=n) >= min_cells):
+            mine = on[part == label]
+            cu = (u[mine] - u[mine].min()).astype(np.int64) + 1
+            cv = (v[mine] - v[mine].min()).astype(np.int64) + 1
+            grid = np.zeros((int(cu.max()) + 2, int(cv.max()) + 2), np.uint8)
+            grid[cu, cv] = 1
+            inside = cv2.erode(grid, kernel)
+            if np.count_nonzero(inside) >= min_cells:
+                out[idx[mine[cv2.dilate(inside, kernel)[cu, cv] > 0]]] = True
+    return out
+
+
 def _footprints(points: npt.NDArray[np.float64], normal: npt.NDArray[np.float64],
                 pixel_area: float) -> npt.NDArray[np.float64]:
     """Area (m^2) of the plane with ``normal`` that each of ``points`` (N, 3) stands for: the
@@ -615,6 +707,17 @@ _WALL_NOISE_Z2 = 0.005
 #: Cell (m) of the plane in which :func:`wall_points` counts occupied area.
 _WALL_CELL = 0.1
 
+
+#: A point this many strided pixels from a dropped table top's pixel, and not nearer than it
+#: by more than _BESIDE_STEP (m), lies beside it (:func:`beside_dropped`).
+_BESIDE_PX = 2
+_BESIDE_STEP = 0.15
+#: Level surfaces lower than this (m) are left alone: a person lying on the floor.
+_LEVEL_MIN_HEIGHT = 0.2
+#: Levels :func:`level_surface_points` looks at (a table, and a desk or bench beside it).
+_LEVELS = 2
+#: A level needs this many points to be looked at.
+_LEVEL_MIN_POINTS = 50
 
 #: Pixels this close to the floor (metres) do not connect the static background's
 #: components: the floor's noisy remnants would join a person's feet to a chair's legs.

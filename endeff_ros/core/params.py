@@ -63,6 +63,10 @@ class EndeffParams:
                               'inside the box (walls, a wall behind a person) are not entities '
                               'and are dropped with the floor; 0 = off.', unit='m^2', lo=0.0,
                               hi=100.0)
+    table_min_area: float = _p(0.3, 'Level surfaces above the floor (table tops, desks) whose '
+                               'area less a 10 cm rim is at least this inside the box are not '
+                               'entities and are dropped with the floor; 0 = off (needs '
+                               'floor_removal).', unit='m^2', lo=0.0, hi=100.0)
     background: bool = _p(True, 'Static background: learn a per-pixel background depth while '
                           'running and drop the connected parts of the foreground that never '
                           'moved (furniture, walls); off for a camera that moves all the time '
@@ -148,8 +152,9 @@ class EndeffParams:
                               'is no end-effector: not reported, no new track starts on it, '
                               'a track already following it may keep it.')
     drop_cut_ends: bool = _p(True, 'Drop an end-effector whose sub-band reaches the image border '
-                             '(within cut_margin_px) or the foreground box (within one voxel): '
-                             'it is where the view or the box cuts the body, not an end.')
+                             '(within cut_margin_px), the foreground box (within one voxel) or '
+                             'a dropped table top that hides the rest: it is where the view '
+                             'cuts the body, not an end.')
     cut_margin_px: int = _p(3, 'How close (pixels) to the image border a sub-band counts as '
                             'cut by it.', unit='px', lo=0, hi=100)
     tip_depth: float = _p(0.14, 'Geodesic depth of the terminal part behind its extreme: '

@@ -50,7 +50,8 @@ class FrameEstimate:
 
     ``points`` (N, 3) is the foreground after downsampling; ``band`` and ``subband`` label each
     point (-1 where the expansion never reached it), ``entity`` the cluster it belongs to (-1:
-    too small). ``unreachable`` counts entity points that no band reached.
+    too small). ``unreachable`` counts entity points that no band reached. ``cut`` (N,) marks
+    the points beside a dropped table top (:attr:`.cloud.ForegroundCloud.cut`), or is None.
     """
 
     points: npt.NDArray[np.float64]
@@ -62,6 +63,7 @@ class FrameEstimate:
     graph: TopologyGraph | None = None
     floor: FloorPlane | None = None
     stage_ms: dict[str, float] = field(default_factory=dict)
+    cut: npt.NDArray[np.bool_] | None = None
 
     def positions(self) -> npt.NDArray[np.float64]:
         """(M, 3) positions of all candidates of all entities."""
@@ -87,17 +89,21 @@ def estimate_frame(frame: RGBDFrame, params: EndeffParams | None = None, *,
                              color=frame.color)
     timer.lap('cloud')
     estimate = estimate_points(cloud.points, params, colors=cloud.colors, timer=timer)
+    estimate = dataclasses.replace(estimate, floor=cloud.floor, cut=cloud.cut)
     if params.drop_cut_ends:
         estimate = drop_cut_ends(estimate, frame.intrinsics, params)
-    return dataclasses.replace(estimate, floor=cloud.floor)
+    return estimate
 
 
 def cut_nodes(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
-              intrinsics: Intrinsics, params: EndeffParams) -> npt.NDArray[np.intp]:
+              intrinsics: Intrinsics, params: EndeffParams,
+              cut: npt.NDArray[np.bool_] | None = None) -> npt.NDArray[np.intp]:
     """Sub-bands (graph nodes) cut by the view or by the foreground box: those with a point
     projecting within ``cut_margin_px`` of the image border, or lying within one voxel of a
-    face of the box. A body that leaves the image (or the box) ends there, so its farthest
-    sub-band is an extreme of the graph although it is no end of the body."""
+    face of the box, or marked in ``cut`` (N,) (beside a dropped table top:
+    :attr:`~.cloud.ForegroundCloud.cut`). A body that leaves the image (or the box, or goes
+    behind a table) ends there, so its farthest sub-band is an extreme of the graph although
+    it is no end of the body."""
     z = np.maximum(points[:, 2], 1e-6)
     u = intrinsics.fx * points[:, 0] / z + intrinsics.cx
     v = intrinsics.fy * points[:, 1] / z + intrinsics.cy
@@ -108,13 +114,16 @@ def cut_nodes(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
     for k, axis in enumerate('xyz'):
         lo, hi = getattr(params, f'box_min_{axis}'), getattr(params, f'box_max_{axis}')
         near |= (points[:, k] < lo + s) | (points[:, k] > hi - s)
+    if cut is not None:
+        near |= cut
     return np.unique(subband[near & (subband >= 0)])
 
 
 def drop_cut_ends(estimate: FrameEstimate, intrinsics: Intrinsics,
                   params: EndeffParams) -> FrameEstimate:
-    """``estimate`` without the candidates whose sub-band is cut (:func:`cut_nodes`)."""
-    cut = cut_nodes(estimate.points, estimate.subband, intrinsics, params)
+    """``estimate`` without the candidates whose sub-band is cut (:func:`cut_nodes`, with
+    the points its ``cut`` marks)."""
+    cut = cut_nodes(estimate.points, estimate.subband, intrinsics, params, estimate.cut)
     if not cut.size or not any(e.candidates for e in estimate.entities):
         return estimate
     entities = [dataclasses.replace(e, candidates=[c for c in e.candidates
