@@ -624,40 +624,60 @@ def level_surface_points(cols: Columns, height: npt.NDArray[np.float64],
         return out
     h = height[idx]
     step = params.floor_distance
-    edges = np.arange(_LEVEL_MIN_HEIGHT, float(h.max()) + 2 * step, step)
-    counts = np.histogram(h, edges)[0]
-    window = counts[:-1] + counts[1:]  # points within two bins: a level between two edges
-    x, y, z = (c[idx] for c in cols)
-    tol = step + _WALL_NOISE_Z2 * z ** 2
-    helper = np.array([1.0, 0.0, 0.0]) if abs(up[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(up, helper)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(up, e1)
-    u, v = ((x * e[0] + y * e[1] + z * e[2]) / _WALL_CELL for e in (e1, e2))
+    bins = ((h - _LEVEL_MIN_HEIGHT) / step).astype(np.intp)
+    window = np.bincount(bins)
+    window[:-1] += window[1:]  # points within two bins: a level between two bin edges
+    tol = step + _WALL_NOISE_Z2 * cols[2][idx] ** 2
+    axes = _plane_axes(up) / _WALL_CELL
     pixel_of = np.flatnonzero(valid)[idx]
-    kernel = np.ones((3, 3), np.uint8)
+    min_cells = params.table_min_area / _WALL_CELL ** 2
     for _ in range(_LEVELS):
-        b = int(np.argmax(window)) if len(window) else 0
-        if not len(window) or window[b] < _LEVEL_MIN_POINTS:
+        b = int(np.argmax(window))
+        if window[b] < max(_LEVEL_MIN_POINTS, min_cells):
             break
         window[max(0, b - 2):b + 3] = 0  # the next level is another surface
-        in_bins = (h >= edges[b]) & (h < edges[b + 2])
-        on = np.flatnonzero(np.abs(h - np.median(h[in_bins])) < tol)
+        level = np.median(h[(bins == b) | (bins == b + 1)])
+        on = np.flatnonzero(np.abs(h - level) < tol)
+        points = np.stack([c[idx[on]] for c in cols], axis=1)
+        cells = np.floor(points @ axes).astype(np.int64)
+        # The whole slab's inside bounds each stretch's: most frames end here.
+        if np.count_nonzero(_cells_inside(cells)[0]) < min_cells:
+            continue
         image = np.zeros(valid.shape, dtype=np.uint8)
         image.reshape(-1)[pixel_of[on]] = 1
         n, labels = cv2.connectedComponents(image, connectivity=8, ltype=cv2.CV_32S)
         part = labels.reshape(-1)[pixel_of[on]]
-        min_cells = params.table_min_area / _WALL_CELL ** 2
         for label in np.flatnonzero(np.bincount(part, minlength=n) >= min_cells):
-            mine = on[part == label]
-            cu = (u[mine] - u[mine].min()).astype(np.int64) + 1
-            cv = (v[mine] - v[mine].min()).astype(np.int64) + 1
-            grid = np.zeros((int(cu.max()) + 2, int(cv.max()) + 2), np.uint8)
-            grid[cu, cv] = 1
-            inside = cv2.erode(grid, kernel)
+            mine = np.flatnonzero(part == label)
+            inside, at = _cells_inside(cells[mine])
             if np.count_nonzero(inside) >= min_cells:
-                out[idx[mine[cv2.dilate(inside, kernel)[cu, cv] > 0]]] = True
+                near = cv2.dilate(inside, _CELL_KERNEL)[at] > 0  # in or beside the inside
+                out[idx[on[mine[near]]]] = True
     return out
+
+
+def _cells_inside(cells: npt.NDArray[np.int64]
+                  ) -> tuple[npt.NDArray[np.uint8], tuple[npt.NDArray[np.int64], ...]]:
+    """The occupancy grid of ``cells`` (K, 2) integer cell coordinates, eroded by one cell
+    (what lies inside a one-cell rim), and each cell's index into it."""
+    at = tuple(cells[:, k] - cells[:, k].min() + 1 for k in range(2))
+    grid = np.zeros((int(at[0].max()) + 2, int(at[1].max()) + 2), np.uint8)
+    grid[at] = 1
+    return cv2.erode(grid, _CELL_KERNEL), at
+
+
+def _plane_axes(normal: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """(3, 2): two orthonormal directions in the plane with unit ``normal`` (columns)."""
+    a, b, c = normal
+    # normal x (1, 0, 0), or x (0, 1, 0) when the normal is close to the x axis.
+    e1 = np.array([0.0, c, -b]) if abs(a) < 0.9 else np.array([-c, 0.0, a])
+    e1 /= math.sqrt(e1 @ e1)
+    e2 = np.array([b * e1[2] - c * e1[1], c * e1[0] - a * e1[2], a * e1[1] - b * e1[0]])
+    return np.stack([e1, e2], axis=1)
+
+
+#: One cell around a cell (:func:`_cells_inside`).
+_CELL_KERNEL = np.ones((3, 3), np.uint8)
 
 
 def _footprints(points: npt.NDArray[np.float64], normal: npt.NDArray[np.float64],
@@ -678,11 +698,8 @@ def _occupied_area(points: npt.NDArray[np.float64], normal: npt.NDArray[np.float
     through a body seen edge-on (a bending person's side) holds the body's front surface
     across its thickness, each pixel at a grazing angle, and their footprints add up to a
     wall's. Projected onto the plane those points cover a thin curve."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(normal, helper)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(normal, e1)
-    u, v = points @ (e1 / _WALL_CELL), points @ (e2 / _WALL_CELL)
+    axes = _plane_axes(normal) / _WALL_CELL
+    u, v = points @ axes[:, 0], points @ axes[:, 1]
     c0, c1 = (u - u.min()).astype(np.int64), (v - v.min()).astype(np.int64)
     # An occupancy grid per label (no sort: a wall holds tens of thousands of points).
     present = np.bincount(part, minlength=n) > 0
