@@ -3,7 +3,9 @@
 Steps: back-projection of the valid depth pixels (optionally every ``pixel_stride``-th pixel),
 a 3D box that keeps the activity area, removal of the floor plane (fitted by RANSAC among
 near-horizontal planes, or given by the frame before and then following the floor each
-frame shows), and an optional voxel grid that bounds the number of points
+frame shows), of walls (:func:`wall_points`) and table tops (:func:`level_surface_points`,
+whose neighbours are marked as cut: :func:`beside_dropped`), the static background
+(:mod:`.background`), and an optional voxel grid that bounds the number of points
 independently of the distance to the camera.
 """
 
