@@ -147,3 +147,18 @@ def test_a_body_in_front_of_the_table_is_not_cut() -> None:
     assert np.count_nonzero(person) > 500
     assert cloud_.cut is not None and np.count_nonzero(cloud_.cut & ~person) > 5  # table legs
     assert not np.any(cloud_.cut & person)
+
+
+def test_a_robot_arm_standing_on_a_table_keeps_its_gripper() -> None:
+    """A robot arm whose pedestal stands on a table: the top goes, the arm stays an entity of
+    its own, and its gripper is found; its pedestal's foot, beside the dropped top, is cut
+    (with the table kept it was no end either: the table's corners were)."""
+    arm = scenes.placed_robot_arm(x=0.0, z=-2.3)
+    lift = np.array([0.0, TOP, 0.0])
+    on_table = Entity([p.transformed(np.eye(3), lift) for p in arm.prims], arm.gt + lift,
+                      arm.gt_ids, arm.gt_prims, arm.gt_radius)
+    s = shot(on_table, table(z=-2.3))
+    pos = estimate_frame(s.frame, PARAMS).positions()
+    gripper = s.gt[1]
+    assert np.linalg.norm(pos - gripper, axis=1).min() < 0.15
+    assert not np.any(in_table(pos) & (scene(pos)[:, 1] > 0.15))  # nothing on the table
