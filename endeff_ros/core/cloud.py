@@ -482,7 +482,7 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
         level = level_surface_points((x, y, z), height, keep, valid, floor.normal, params)
         if level.any():
             keep &= ~level
-            beside = beside_dropped(z_image, valid, level, keep)
+            beside = beside_dropped(z, valid, level, keep)
     if background is not None:
         # The model sees every reading of the strided image (walls beyond the box included:
         # a person in front of them changed those pixels), and the box and floor as a mask.
@@ -511,17 +511,17 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
     return ForegroundCloud(np.ascontiguousarray(out[:, :3]), floor, colors, cut)
 
 
-def beside_dropped(z_image: npt.NDArray[np.floating], valid: npt.NDArray[np.bool_],
+def beside_dropped(z: npt.NDArray[np.float64], valid: npt.NDArray[np.bool_],
                    dropped: npt.NDArray[np.bool_], keep: npt.NDArray[np.bool_]
                    ) -> npt.NDArray[np.bool_]:
     """Points of ``keep`` whose pixel lies within ``_BESIDE_PX`` strided pixels of a
     ``dropped`` point's pixel and not nearer than those by more than ``_BESIDE_STEP``: the
     table top hides what lies beyond it, so a body seen over it (or below its front edge)
     ends there, and that end is a cut, like the image border's; a body in front of the table
-    is not cut by it. ``z_image`` (H, W) the strided depth, ``valid`` its pixels that became
-    the points (in order); ``dropped`` and ``keep`` per point."""
+    is not cut by it. ``z`` the points' depths, ``valid`` (H, W) the strided image's pixels
+    that became the points (in order); ``dropped`` and ``keep`` per point."""
     size = 2 * _BESIDE_PX + 1
-    z = z_image[valid].astype(np.float32)
+    z = z.astype(np.float32)
     image = np.full(valid.shape, np.inf, dtype=np.float32)
     image[valid] = np.where(dropped, z, np.inf)
     nearest = cv2.erode(image, np.ones((size, size), np.uint8))[valid]
