@@ -266,18 +266,22 @@ def far_side_pixels(depth: npt.NDArray[np.float32], stride: int, *,
     with ``flying`` the :func:`flying_pixels` on them."""
     z = _readings(depth)
     step = _edge_step(z, stride)
-    lower = z - step  # a neighbour below this is nearer by more than the step
-    far = np.zeros(z.shape, dtype=bool)
-    far[:, :-1] |= z[:, 1:] < lower[:, :-1]
-    far[:, 1:] |= z[:, :-1] < lower[:, 1:]
-    far[:-1, :] |= z[1:, :] < lower[:-1, :]
-    far[1:, :] |= z[:-1, :] < lower[1:, :]
-    return (far | flying_pixels(z, step)) if flying else far
+    lo = _nearest_neighbour(z)
+    far = lo < z - step  # some 4-neighbour is nearer by more than the step
+    return (far | flying_pixels(z, step, lo)) if flying else far
 
 
 def _readings(depth: npt.NDArray[np.floating]) -> npt.NDArray[np.float32]:
     """``depth`` as float32 with inf where there is no reading (0, NaN, inf)."""
-    return np.where(np.isfinite(depth) & (depth > 0), depth, np.inf).astype(np.float32)
+    z = np.array(depth, dtype=np.float32)
+    z[~((z > 0) & (z < np.inf))] = np.inf  # NaN compares False
+    return z
+
+
+def _nearest_neighbour(z: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+    """Per pixel of the readings ``z`` (inf: none), the nearest of its 4-neighbours (inf
+    beyond the image): one erosion by the cross without its centre."""
+    return cv2.erode(z, _CROSS, borderType=cv2.BORDER_CONSTANT, borderValue=np.inf)
 
 
 def _edge_step(z: npt.NDArray[np.float32], stride: int) -> npt.NDArray[np.float32]:
@@ -288,8 +292,8 @@ def _edge_step(z: npt.NDArray[np.float32], stride: int) -> npt.NDArray[np.float3
 _CROSS = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], np.uint8)
 
 
-def flying_pixels(z: npt.NDArray[np.float32],
-                  step: npt.NDArray[np.float32]) -> npt.NDArray[np.bool_]:
+def flying_pixels(z: npt.NDArray[np.float32], step: npt.NDArray[np.float32],
+                  lo: npt.NDArray[np.float32] | None = None) -> npt.NDArray[np.bool_]:
     """(H, W) pixels of the readings ``z`` (float32 metres, inf: no reading) that read a mix
     of two surfaces at an occlusion edge; ``step`` (H, W) the edge step at each.
 
@@ -303,9 +307,10 @@ def flying_pixels(z: npt.NDArray[np.float32],
     default stride, a surface seen within 3 degrees of grazing. A fist punched at the camera
     (its forearm hidden behind it) may hang on its chest by flying pixels alone, so
     :meth:`BackgroundModel.foreground` cuts them only while colour comes: the still chest
-    then shows its own motion.
+    then shows its own motion. ``lo``: :func:`_nearest_neighbour` of ``z`` if the caller has it.
     """
-    lo = cv2.erode(z, _CROSS, borderType=cv2.BORDER_CONSTANT, borderValue=np.inf)
+    if lo is None:
+        lo = _nearest_neighbour(z)
     hi = cv2.dilate(np.where(np.isinf(z), np.float32(0), z), _CROSS,
                     borderType=cv2.BORDER_CONSTANT, borderValue=0)
     side = np.float32(FLYING_FRACTION) * step
@@ -320,10 +325,11 @@ def bridge_dropouts(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_],
     ``BRIDGE_STEP`` takes the nearest of their depths and joins the mask (not between a
     person and what stands behind them, whose depths disagree)."""
     box = np.ones((3, 3), np.uint8)
-    near = cv2.erode(np.where(mask, depth, np.inf).astype(np.float32), box)
-    far = cv2.dilate(np.where(mask, depth, 0).astype(np.float32), box)
+    near = cv2.erode(np.where(mask, depth, np.float32(np.inf)).astype(np.float32, copy=False),
+                     box)
+    far = cv2.dilate(np.where(mask, depth, np.float32(0)).astype(np.float32, copy=False), box)
     fill = (depth <= 0) & np.isfinite(near) & (far - near <= np.float32(BRIDGE_STEP))
-    return np.where(fill, near, depth).astype(np.float32), mask | fill
+    return np.where(fill, near, depth).astype(np.float32, copy=False), mask | fill
 
 
 def strided_grey(color: npt.NDArray[np.uint8], shape: tuple[int, int]) -> npt.NDArray[np.uint8]:
@@ -371,7 +377,7 @@ def _with_feet(out: npt.NDArray[np.bool_], depth: npt.NDArray[np.float32],
     attached[low_labels[touch]] = True
     attached[0] = False
     out = out.copy()
-    out[rs] |= attached[low_labels]
+    out[rs] |= np.take(attached, low_labels)
     return out
 
 
@@ -581,9 +587,8 @@ class BackgroundModel:
         then does nothing for this stamp); after learning it is what :meth:`observe_color`
         saw in the frame before, and ``color`` is not used.
         """
-        d = np.nan_to_num(np.asarray(depth, dtype=np.float32), nan=0.0, posinf=0.0,
-                          neginf=0.0)
-        valid = d > 0
+        d = np.array(depth, dtype=np.float32)
+        valid = (d > 0) & (d < np.inf)  # NaN compares False
         d[~valid] = 0
         t = self._clock(stamp_ns)
         stride = params.pixel_stride
@@ -661,18 +666,20 @@ class BackgroundModel:
         fresh = valid & ~known
         pending = farther | fresh
         agree = pending & (self._far_n > 0) & (np.abs(d - self._far_ref) <= margin)
-        self._far_n = np.where(pending, np.where(agree, self._far_n + 1, 1), 0).astype(np.int16)
+        self._far_n = np.where(pending, np.where(agree, self._far_n + 1, 1),
+                               0).astype(np.int16, copy=False)
         self._far_ref = np.where(pending & ~agree, d, self._far_ref)
         adopt = self._far_n >= FAR_FRAMES
         # Readings within the margin: the running mean follows them.
         steady = known & ~nearer & ~farther
         bg = np.where(steady, bg + np.float32(FOLLOW) * (d - bg), bg)
-        bg = np.where(adopt, d, bg).astype(np.float32)
+        bg = np.where(adopt, d, bg).astype(np.float32, copy=False)
         self._far_t = np.where(adopt & known, t, self._far_t)
         self._far_n[adopt] = 0
         # No reading for MISS_FRAMES frames: what was there left, nothing is seen behind it
         # (not after a few frames: dark or glossy surfaces drop out now and then).
-        self._miss_n = np.where(valid | (bg <= 0), 0, self._miss_n + 1).astype(np.int16)
+        self._miss_n = np.where(valid | (bg <= 0), 0,
+                                self._miss_n + 1).astype(np.int16, copy=False)
         bg[self._miss_n >= MISS_FRAMES] = 0
         # Nearer readings: absorbed after background_absorb_s at a steady depth.
         same = nearer & (np.abs(d - self._near_ref) <= margin)
@@ -700,11 +707,12 @@ class BackgroundModel:
                 return candidate.copy()
             # Learning with colour: only what stirs (a person present from the start has not
             # moved in depth yet; furniture does neither).
-            out = _enough(labels, stirred, total, COLOR_MIN_FRACTION, stride)[labels] & candidate
+            out = np.take(_enough(labels, stirred, total, COLOR_MIN_FRACTION, stride),
+                          labels) & candidate
             left = upper & ~out
             same = left & (self._still_n > 0) & (np.abs(d - self._still_z) <= margin)
             self._still_n = np.where(left, np.where(same, self._still_n + 1, 1),
-                                     0).astype(np.int16)
+                                     0).astype(np.int16, copy=False)
             self._still_z = np.where(left & ~same, d, self._still_z)
             return _with_feet(out, d, low, candidate, far_side, stride)
         if not self._seeded:
@@ -721,10 +729,10 @@ class BackgroundModel:
         moving = _enough(labels, changed, total, MIN_CHANGED_FRACTION, stride)
         # Components with changed pixels renew the hold (below); one that moves by colour
         # alone only on the surface that also stirred within COLOR_CONFIRM_S.
-        renew = moving[labels]
+        renew = np.take(moving, labels)  # moving[labels], 2-3x faster
         if stirred is not None:
             by_colour = _enough(labels, stirred, total, COLOR_MIN_FRACTION, stride)
-            on_colour = by_colour[labels]
+            on_colour = np.take(by_colour, labels)
             renew |= (on_colour & (t - self._colour_t <= COLOR_CONFIRM_S)
                       & (np.abs(d - self._colour_z) <= margin))
             self._colour_t[on_colour] = t
@@ -744,7 +752,7 @@ class BackgroundModel:
         keep = moving | held
         keep[self._track_labels(labels, self._carried_uv)] = True
         keep[0] = False
-        fg = keep[labels] & candidate
+        fg = np.take(keep, labels) & candidate
         # Certified static: pixels that were dropped for STATIC_S at the same depth stay
         # dropped when a moving component joins them (furniture a person stands next to).
         margin_ok = np.abs(d - self._static_z) <= margin
