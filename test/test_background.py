@@ -16,9 +16,9 @@ import cv2
 import numpy as np
 import pytest
 
-from endeff_ros.core import cloud
+from endeff_ros.core import cloud, floor
 from endeff_ros.core.background import BackgroundModel, bridge_dropouts, depth_components
-from endeff_ros.core.cloud import FloorPlane
+from endeff_ros.core.floor import FloorPlane
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.single_frame import estimate_frame
 from endeff_ros.core.tracker import Tracker
@@ -514,16 +514,16 @@ def test_only_a_plane_off_the_learnt_background_means_a_camera_raised_or_lowered
     # Through the whole decision: the floor the lowered camera sees counts ...
     known = FloorPlane(up, 1.1)
     check = functools.partial(cloud._off_background, model, z, valid, cols, keep, PARAMS)
-    moved = cloud._moved_floor(known, cols, keep, PARAMS, PIXEL_AREA, check)
+    moved = floor.moved_floor(known, cols, keep, PARAMS, PIXEL_AREA, check)
     assert moved is not None and abs(moved.offset - 0.8) < 0.03
     # ... the table's plane, the best one with the floor hidden, does not.
     monkeypatch.setattr(sys.modules[__name__], 'CAMERA_HEIGHT', 1.1)
     z, valid, cols, keep = _strided(frame(32, scene).depth)
     above = keep & (table.heights(*cols) > -PARAMS.floor_distance)
-    found = cloud._moved_floor(known, cols, above, PARAMS, PIXEL_AREA, lambda plane: True)
+    found = floor.moved_floor(known, cols, above, PARAMS, PIXEL_AREA, lambda plane: True)
     assert found is not None and abs(found.offset - table.offset) < 0.03
     check = functools.partial(cloud._off_background, model, z, valid, cols, keep, PARAMS)
-    assert cloud._moved_floor(known, cols, above, PARAMS, PIXEL_AREA, check) is None
+    assert floor.moved_floor(known, cols, above, PARAMS, PIXEL_AREA, check) is None
 
 
 def test_a_floor_refit_that_finds_no_plane_is_tried_again(monkeypatch):

@@ -15,14 +15,13 @@ import pytest
 
 from endeff_ros.core.cloud import (
     MAX_RANGE_M,
-    FloorPlane,
     box_mask,
     depth_to_points,
-    fit_floor,
     foreground_cloud,
     voxel_downsample,
 )
 from endeff_ros.core.errors import InputError, ParameterError
+from endeff_ros.core.floor import FloorPlane, fit_floor
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.types import KINECT_640, Intrinsics, RGBDFrame
 from endeff_ros.ros.convert import depth_image_to_array

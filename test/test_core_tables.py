@@ -1,7 +1,7 @@
 """Level surfaces above the floor that cover a table's area (table tops, desks) are dropped
-with the floor (:func:`endeff_ros.core.cloud.level_surface_points`); a body, a chair's seat and
+with the floor (:func:`endeff_ros.core.surfaces.level_surface_points`); a body, a chair's seat and
 upright things cut by a level slab are not. What a dropped top hides ends beside it, and that
-end is a cut (:func:`endeff_ros.core.cloud.beside_dropped`), no end-effector."""
+end is a cut (:func:`endeff_ros.core.surfaces.beside_dropped`), no end-effector."""
 
 from __future__ import annotations
 

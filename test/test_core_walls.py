@@ -1,5 +1,5 @@
 """Large planes in the foreground (walls, a wall right behind a person) are dropped with the
-floor (:func:`endeff_ros.core.cloud.wall_points`); a body and small flat parts are not."""
+floor (:func:`endeff_ros.core.surfaces.wall_points`); a body and small flat parts are not."""
 
 from __future__ import annotations
 

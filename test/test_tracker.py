@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 import scenarios as sc
 
-from endeff_ros.core.cloud import FloorPlane
+from endeff_ros.core.floor import FloorPlane
 from endeff_ros.core.graph import approximate_geodesic
 from endeff_ros.core.params import EndeffParams as _EndeffParams
 from endeff_ros.core.single_frame import FrameEstimate, estimate_frame

@@ -25,7 +25,7 @@ background model removes what never moved, with the person present from the firs
   such a component within ``HOLD_S`` at the same depth (a person whose motion pauses for a
   few frames; not the wall an arm swept over). So a chair that was always there (no changed
   pixel) is dropped, a person whose torso stood still while an arm moved stays whole, and a
-  robot's static pedestal stays with its moving arm. Pixels within ``cloud.FLOOR_BAND`` of
+  robot's static pedestal stays with its moving arm. Pixels within ``floor.FLOOR_BAND`` of
   the floor do not connect components (the floor's noisy remnants joined feet to chair
   legs); they are kept next to kept pixels at their depth.
   Pixels without a reading inside a surface (stereo and ToF dropouts: a D455's legs at 3 m
@@ -123,7 +123,7 @@ background model removes what never moved, with the person present from the firs
   colour still says the scene moves re-learns again, so the background is the view after
   the camera stopped, not one taken mid-turn, whose furniture edges would stay "changed".
   A tilt, or the camera raised or lowered, changes depths mostly one way and passes this
-  test; the floor plane moving (``cloud._moved_floor``) tells it instead, through
+  test; the floor plane moving (``floor.moved_floor``) tells it instead, through
   :meth:`BackgroundModel.camera_moved`.
   That colour is compared with the frame that re-learnt last (its grey image is kept when
   the older ones are dropped): a braking camera's last step, too small for the depth, is

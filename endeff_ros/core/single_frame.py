@@ -18,7 +18,8 @@ from .bands import (
     expand_bands,
     split_subbands,
 )
-from .cloud import FloorPlane, foreground_cloud
+from .cloud import foreground_cloud
+from .floor import FloorPlane
 from .graph import TopologyGraph, approximate_geodesic, build_graph, find_end_effectors, geodesic
 from .params import EndeffParams
 from .types import Candidate, Intrinsics, RGBDFrame

@@ -51,7 +51,7 @@ import numpy as np
 from .assignment import min_cost_assignment
 from .background import BackgroundModel
 from .bands import UNREACHED
-from .cloud import FloorPlane
+from .floor import FloorPlane
 from .flow import FlowEstimator, propagate_points
 from .graph import (
     approximate_geodesic,
