@@ -258,19 +258,20 @@ def _merge_close(points: npt.NDArray[np.float64], comp: npt.NDArray[np.intp],
             x = parent[x]
         return x
 
+    # Pairs whose bounding boxes come within the gap (row-major: a < b as a double loop).
+    apart = ((lo[:, None, :] - hi[None, :, :] > gap).any(axis=2)
+             | (lo[None, :, :] - hi[:, None, :] > gap).any(axis=2))
     trees: dict[int, cKDTree] = {}
-    for a in range(labels.size):
-        for b in range(a + 1, labels.size):
-            if np.any(lo[a] - hi[b] > gap) or np.any(lo[b] - hi[a] > gap):
-                continue
-            ra, rb = find(a), find(b)
-            if ra == rb:
-                continue
-            small, large = (a, b) if len(members[a]) < len(members[b]) else (b, a)
-            tree = trees.setdefault(large, cKDTree(points[members[large]]))
-            d, _ = tree.query(points[members[small]], distance_upper_bound=gap)
-            if np.isfinite(d).any():
-                parent[max(ra, rb)] = min(ra, rb)
+    for a, b in zip(*np.nonzero(np.triu(~apart, k=1))):
+        a, b = int(a), int(b)
+        ra, rb = find(a), find(b)
+        if ra == rb:
+            continue
+        small, large = (a, b) if len(members[a]) < len(members[b]) else (b, a)
+        tree = trees.setdefault(large, cKDTree(points[members[large]]))
+        d, _ = tree.query(points[members[small]], distance_upper_bound=gap)
+        if np.isfinite(d).any():
+            parent[max(ra, rb)] = min(ra, rb)
     roots = np.array([find(x) for x in range(labels.size)])
     remap = np.zeros(int(comp.max()) + 1, dtype=np.intp)
     remap[labels] = labels[roots]
