@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from endeff_ros.core import cloud, floor
-from endeff_ros.core.background import BackgroundModel, bridge_dropouts, depth_components
+from endeff_ros.core.background import BackgroundModel
+from endeff_ros.core.depth_edges import bridge_dropouts, depth_components
 from endeff_ros.core.floor import FloorPlane
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.single_frame import estimate_frame
