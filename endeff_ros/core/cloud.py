@@ -37,8 +37,7 @@ if TYPE_CHECKING:
     import numpy.typing as npt
 
     from .background import BackgroundModel
-
-    Columns = tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]
+    from .types import Columns
 
 #: Depth beyond this many metres is treated as no reading (no RGB-D sensor of this class
 #: measures farther; it also catches garbage such as 65535 mm).

@@ -17,9 +17,7 @@ if TYPE_CHECKING:
     import numpy.typing as npt
 
     from .params import EndeffParams
-    from .types import Intrinsics
-
-    Columns = tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]
+    from .types import Columns, Intrinsics
 
 
 def beside_dropped(z: npt.NDArray[np.float64], valid: npt.NDArray[np.bool_],

@@ -16,6 +16,9 @@ from .errors import InputError
 if TYPE_CHECKING:
     import numpy.typing as npt
 
+    #: x, y and z columns of N points (the back-projected pixels of Section 3).
+    Columns = tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]
+
 
 @dataclass(frozen=True)
 class Intrinsics:
