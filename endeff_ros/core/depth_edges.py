@@ -100,8 +100,9 @@ def flying_pixels(z: npt.NDArray[np.float32], step: npt.NDArray[np.float32],
     across the pixel is one only when it grows by half the step per pixel: at 2 m and the
     default stride, a surface seen within 3 degrees of grazing. A fist punched at the camera
     (its forearm hidden behind it) may hang on its chest by flying pixels alone, so
-    :meth:`BackgroundModel.foreground` cuts them only while colour comes: the still chest
-    then shows its own motion. ``lo``: :func:`_nearest_neighbour` of ``z`` if the caller has it.
+    :meth:`.background.BackgroundModel.foreground` cuts them only while colour comes: the
+    still chest then shows its own motion. ``lo``: :func:`_nearest_neighbour` of ``z`` if the
+    caller has it.
     """
     if lo is None:
         lo = _nearest_neighbour(z)

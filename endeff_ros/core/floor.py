@@ -30,9 +30,9 @@ if TYPE_CHECKING:
 class FloorPlane:
     """Plane ``normal . x + offset = 0`` with ``normal`` pointing up (towards -y), unit length.
 
-    ``refit``: a known plane that may no longer hold (the camera moved): :func:`foreground_cloud`
-    fits the floor anew and uses this one only if no floor is found, returning it still
-    marked ``refit`` so that the next frame tries again.
+    ``refit``: a known plane that may no longer hold (the camera moved):
+    :func:`.cloud.foreground_cloud` fits the floor anew and uses this one only if no floor is
+    found, returning it still marked ``refit`` so that the next frame tries again.
     """
 
     normal: npt.NDArray[np.float64]

@@ -37,7 +37,7 @@ def plane_hypotheses(points: npt.NDArray[np.float64], idx: npt.NDArray[np.int64]
 
 
 #: Sample points whose least-squares plane is one local floor hypothesis (see
-#: :func:`fit_floor`): on a 512-1024 point sample of the box, a patch some 10-30 cm across
+#: :func:`.floor.fit_floor`): on a 512-1024 point sample of the box, a patch some 10-30 cm across
 #: (larger patches reached over walls and legs on a hall's floor 3-5 m away; 8 and 12 gave
 #: the mocap dev subset the same scores: docs/design.md, "Floor hypotheses").
 _LOCAL_NEIGHBOURS = 6
