@@ -56,3 +56,18 @@ def test_command_line_compare_exit_status(room_bag, tmp_path, capsys):
     assert fingerprint.main([str(bag), '--compare', str(tmp_path / 'missing.json')]) == 2
     assert 'cannot read' in capsys.readouterr().err
     assert fingerprint.main([str(bag), '--compare']) == 2
+
+
+def test_a_corrupt_bag_is_named_and_never_counted_identical(room_bag, tmp_path, capsys):
+    bag, _ = room_bag
+    broken = tmp_path / 'broken.mcap'
+    broken.write_bytes(b'\x89MCAP0\r\n not a bag')
+    assert fingerprint.main([str(broken), '--json', str(tmp_path / 'b.json')]) == 2
+    assert 'broken.mcap' in capsys.readouterr().err
+    entry = fingerprint.fingerprint_bag(broken)
+    assert entry['digest'] is None and entry['error']
+    status, lines = fingerprint.compare({'bags': [entry]}, {'bags': [entry]})
+    assert status == 2
+    assert lines[-1] == '0 of 1 bags identical'
+    good = fingerprint.fingerprint_bag(bag)
+    assert fingerprint.compare({'bags': [good, entry]}, {'bags': [good, entry]})[0] == 2

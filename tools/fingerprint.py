@@ -9,8 +9,9 @@ are hashed, and the bag's digest chains the frames' hashes. A frame an estimator
 
 ``--compare OLD.json`` (a report this tool wrote, e.g. from a ``git worktree`` of the code
 before) lists the bags whose digests differ and the first frame that differs in each, and
-exits with status 1 if any does (2 for bags missing from either report). Without it, the
-report is printed (and written with ``--json``).
+exits with status 1 if any does (2 for bags missing from either report or that could not be
+read). Without it, the report is printed (and written with ``--json``); a bag that cannot be
+read (corrupt, truncated) is named on stderr, has no digest, and the status is 2.
 
     python -m tools.fingerprint BAG_OR_DIR [...] [--every N] [--params YAML] [--jobs 2]
                                 [--json OUT] [--compare OLD.json]
@@ -26,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from endeff_ros.bag.errors import BagError
 from endeff_ros.bag.reader import BagReader
 from endeff_ros.cli_common import print_json
 from endeff_ros.core.errors import InputError
@@ -56,21 +58,26 @@ def _frame_hash(tracks: Any, single: Any) -> str:
 
 
 def fingerprint_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
-    """The bag's name, frame count, per-frame hashes and digest."""
+    """The bag's name, frame count, per-frame hashes and digest; a bag that cannot be read
+    (``BagError``: corrupt, truncated, missing topics) has no digest and says why."""
     tracker = Tracker(params or EndeffParams())
     estimate = _background_estimate()
     frames = []
-    with BagReader(bag) as reader:
-        for frame, _ in reader.frames():
-            try:
-                tracks = tracker.update(frame).tracks
-            except InputError:
-                tracks = None
-            try:
-                single = estimate(frame, params).positions()
-            except InputError:
-                single = None
-            frames.append(_frame_hash(tracks, single))
+    try:
+        with BagReader(bag) as reader:
+            for frame, _ in reader.frames():
+                try:
+                    tracks = tracker.update(frame).tracks
+                except InputError:
+                    tracks = None
+                try:
+                    single = estimate(frame, params).positions()
+                except InputError:
+                    single = None
+                frames.append(_frame_hash(tracks, single))
+    except BagError as exc:
+        return {'bag': bag.name, 'frames': len(frames), 'digest': None, 'error': str(exc),
+                'frame_hashes': frames}
     digest = hashlib.sha1('\n'.join(frames).encode()).hexdigest()[:16]
     return {'bag': bag.name, 'frames': len(frames), 'digest': digest, 'frame_hashes': frames}
 
@@ -85,6 +92,12 @@ def compare(old: dict[str, Any], new: dict[str, Any]) -> tuple[int, list[str]]:
             lines.append(f'{name}: only in the {"new" if name in b else "old"} report')
             status = 2
             continue
+        if a[name]['digest'] is None or b[name]['digest'] is None:
+            why = a[name].get('error') or b[name].get('error')
+            lines.append(f'{name}: not read in the {"old" if a[name]["digest"] is None else "new"}'
+                         f' run: {why}')
+            status = 2
+            continue
         if a[name]['digest'] == b[name]['digest']:
             continue
         status = max(status, 1)
@@ -93,7 +106,8 @@ def compare(old: dict[str, Any], new: dict[str, Any]) -> tuple[int, list[str]]:
                      min(a[name]['frames'], b[name]['frames']))
         lines.append(f'{name}: differs from frame {first} on ({a[name]["frames"]} / '
                      f'{b[name]["frames"]} frames)')
-    same = sum(1 for n in set(a) & set(b) if a[n]['digest'] == b[n]['digest'])
+    same = sum(1 for n in set(a) & set(b)
+               if a[n]['digest'] is not None and a[n]['digest'] == b[n]['digest'])
     lines.append(f'{same} of {len(set(a) | set(b))} bags identical')
     return status, lines
 
@@ -110,9 +124,12 @@ def main(argv: list[str] | None = None) -> int:
         del argv[i:i + 2]
     args, bags, params = parse_bag_args(__doc__, argv, 'fingerprint')
     report = {'bags': run_per_bag(fingerprint_bag, bags, params, args.jobs)}
+    unread = [b for b in report['bags'] if b['digest'] is None]
+    for b in unread:
+        print(f'fingerprint: {b["error"]}', file=sys.stderr)
     if old_path is None:
         print_json(report, args.json)
-        return 0
+        return 2 if unread else 0
     if args.json:
         Path(args.json).write_text(json.dumps(report, indent=1) + '\n')
     try:
