@@ -126,32 +126,20 @@ def fit_floor(points: npt.NDArray[np.float64], *, distance: float, max_tilt_deg:
 
 #: A floor shows at least this area inside the box (square metres; see :func:`fit_floor`).
 FLOOR_MIN_AREA_M2 = 0.5
-
-
 #: A floor lies at least this far below the camera's centre (metres): a camera looks at a
 #: floor from above, and a plane through the camera is the fan of rays along an image border.
 FLOOR_MIN_CLEARANCE_M = 0.1
-
-
 #: Weight of a frame's own least-squares floor when a known floor follows it (see
 #: :func:`follow_floor`); the known plane converges to what the frames show in about ten.
 FLOOR_FOLLOW = 0.2
-
-
 #: A floor found anew at more than this angle (degrees) to the known plane, at the same
 #: height below the camera within FLOOR_SAME_HEIGHT_M (metres), means the camera turned
 #: (see :func:`moved_floor`).
 FLOOR_TURNED_DEG = 2.0
-
-
 FLOOR_SAME_HEIGHT_M = 0.05
-
-
 #: A floor found parallel to the known one at another height means the camera was raised or
 #: lowered when at least this fraction of its points lies off the learnt background.
 FLOOR_MOVED_CHANGED = 0.5
-
-
 #: At most this many points of a frame's floor feed :func:`follow_floor`'s fit.
 _FOLLOW_SAMPLE = 4096
 
@@ -238,7 +226,5 @@ def moved_floor(floor: FloorPlane, cols: Columns, keep: npt.NDArray[np.bool_],
 #: Pixels this close to the floor (metres) do not connect the static background's
 #: components: the floor's noisy remnants would join a person's feet to a chair's legs.
 FLOOR_BAND = 0.1
-
-
 #: Points the floor is fitted on (see :func:`fit_floor`).
 FLOOR_SAMPLE = 512

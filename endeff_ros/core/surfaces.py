@@ -86,11 +86,7 @@ def wall_points(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
         on = np.flatnonzero(np.abs(pts @ normal + offset) < tol)
         # Only connected stretches of the plane that are large themselves: a slab at a
         # person's depth also holds their torso and whatever stands beside them.
-        pixels = pixel_of[left[on]]
-        image = np.zeros(valid.shape, dtype=np.uint8)
-        image.reshape(-1)[pixels] = 1
-        _, labels = cv2.connectedComponents(image, connectivity=8, ltype=cv2.CV_32S)
-        part = labels.reshape(-1)[pixels]
+        _, part = _stretches(pixel_of[left[on]], valid.shape)
         inliers = pts[on]
         area = np.bincount(part, weights=footprints(inliers, normal, pixel_area))
         big = area >= params.wall_min_area
@@ -154,10 +150,7 @@ def level_surface_points(cols: Columns, height: npt.NDArray[np.float64],
         # The whole slab's inside bounds each stretch's: most frames end here.
         if np.count_nonzero(_cells_inside(cells)[0]) < min_cells:
             continue
-        image = np.zeros(valid.shape, dtype=np.uint8)
-        image.reshape(-1)[pixel_of[on]] = 1
-        n, labels = cv2.connectedComponents(image, connectivity=8, ltype=cv2.CV_32S)
-        part = labels.reshape(-1)[pixel_of[on]]
+        n, part = _stretches(pixel_of[on], valid.shape)
         for label in np.flatnonzero(np.bincount(part, minlength=n) >= min_cells):
             mine = np.flatnonzero(part == label)
             inside, at = _cells_inside(cells[mine])
@@ -165,6 +158,16 @@ def level_surface_points(cols: Columns, height: npt.NDArray[np.float64],
                 near = cv2.dilate(inside, _CELL_KERNEL)[at] > 0  # in or beside the inside
                 out[idx[on[mine[near]]]] = True
     return out
+
+
+def _stretches(pixels: npt.NDArray[np.intp], shape: tuple[int, int]
+               ) -> tuple[int, npt.NDArray[np.int32]]:
+    """The 8-connected stretches of the strided image's ``pixels`` (flat indices into an
+    image of ``shape``): their number (label 0 included) and each pixel's label."""
+    image = np.zeros(shape, dtype=np.uint8)
+    image.reshape(-1)[pixels] = 1
+    n, labels = cv2.connectedComponents(image, connectivity=8, ltype=cv2.CV_32S)
+    return n, labels.reshape(-1)[pixels]
 
 
 def _cells_inside(cells: npt.NDArray[np.int64]
@@ -208,36 +211,20 @@ def _occupied_area(points: npt.NDArray[np.float64], normal: npt.NDArray[np.float
 
 #: Planes :func:`wall_points` looks for (a wall behind the person and one beside).
 _WALL_PLANES = 2
-
-
 #: A plane whose area the sample puts below this share of ``wall_min_area`` is not checked on
 #: all points.
 _WALL_SAMPLE_SHARE = 0.5
-
-
 #: Depth-noise term of the wall tolerance, metres per square metre of depth.
 _WALL_NOISE_Z2 = 0.005
-
-
 #: Cell (m) of the plane in which :func:`wall_points` counts occupied area.
 _WALL_CELL = 0.1
-
-
 #: A point this many strided pixels from a dropped table top's pixel, and not nearer than it
 #: by more than _BESIDE_STEP (m), lies beside it (:func:`beside_dropped`).
 _BESIDE_PX = 2
-
-
 _BESIDE_STEP = 0.15
-
-
 #: Level surfaces lower than this (m) are left alone: a person lying on the floor.
 _LEVEL_MIN_HEIGHT = 0.2
-
-
 #: Levels :func:`level_surface_points` looks at (a table, and a desk or bench beside it).
 _LEVELS = 2
-
-
 #: A level needs this many points to be looked at.
 _LEVEL_MIN_POINTS = 50
