@@ -19,6 +19,7 @@ read (corrupt, truncated) is named on stderr, has no digest, and the status is 2
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import json
 import sys
@@ -112,17 +113,14 @@ def compare(old: dict[str, Any], new: dict[str, Any]) -> tuple[int, list[str]]:
     return status, lines
 
 
+def _compare_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument('--compare', metavar='OLD.json',
+                        help='compare with a report this tool wrote (exit status 1: differs)')
+
+
 def main(argv: list[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    old_path = None
-    if '--compare' in argv:
-        i = argv.index('--compare')
-        if i + 1 >= len(argv):
-            print('fingerprint: --compare needs a report (JSON)', file=sys.stderr)
-            return 2
-        old_path = argv[i + 1]
-        del argv[i:i + 2]
-    args, bags, params = parse_bag_args(__doc__, argv, 'fingerprint')
+    args, bags, params = parse_bag_args(__doc__, argv, 'fingerprint', _compare_option)
+    old_path = args.compare
     report = {'bags': run_per_bag(fingerprint_bag, bags, params, args.jobs)}
     unread = [b for b in report['bags'] if b['digest'] is None]
     for b in unread:

@@ -14,12 +14,16 @@ from endeff_ros.core.params import EndeffParams
 
 
 def parse_bag_args(doc: str, argv: list[str] | None, name: str,
+                   extra: Callable[[argparse.ArgumentParser], None] | None = None,
                    ) -> tuple[argparse.Namespace, list[Path], EndeffParams | None]:
     """The command line of a per-bag tool (bags or folders searched for bags as ``endeff
     eval`` does, ``--every``, ``--params``, ``--jobs``, ``--json``): the parsed arguments, the
     bags (sorted by path, every ``--every``-th) and the parameters. ``doc``: the
-    tool's docstring (its first line describes it); ``name``: the tool's name for errors."""
+    tool's docstring (its first line describes it); ``name``: the tool's name for errors;
+    ``extra(parser)`` adds the tool's own options."""
     parser = argparse.ArgumentParser(description=doc.split('\n')[0])
+    if extra is not None:
+        extra(parser)
     parser.add_argument('bags', nargs='+', help='bags, or folders holding bags')
     parser.add_argument('--every', type=int, default=1, help='every N-th bag (sorted by name)')
     parser.add_argument('--params', help='parameter YAML (default: the defaults)')
