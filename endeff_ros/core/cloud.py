@@ -106,13 +106,14 @@ def _columns(z: npt.NDArray[np.floating], valid: npt.NDArray[np.bool_],
              intrinsics: Intrinsics, stride: int) -> Columns:
     """x, y, z columns of the ``valid`` pixels of the strided depth image ``z``."""
     h, w = intrinsics.height, intrinsics.width
-    zz = z[valid].astype(np.float64)
+    px = np.flatnonzero(valid)  # an index array gathers faster than the mask, three times
+    zz = z.ravel()[px].astype(np.float64)
     # Pixel offsets from the principal point per column and row, broadcast over the image:
     # no pixel-coordinate arrays are materialised.
     du = np.arange(0, w, stride, dtype=np.float64) - intrinsics.cx
     dv = np.arange(0, h, stride, dtype=np.float64) - intrinsics.cy
-    x = np.broadcast_to(du[None, :], z.shape)[valid] * zz / intrinsics.fx
-    y = np.broadcast_to(dv[:, None], z.shape)[valid] * zz / intrinsics.fy
+    x = np.broadcast_to(du[None, :], z.shape).ravel()[px] * zz / intrinsics.fx
+    y = np.broadcast_to(dv[:, None], z.shape).ravel()[px] * zz / intrinsics.fy
     return x, y, zz
 
 

@@ -96,14 +96,16 @@ def build_graph(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
     node_band[subband[reached]] = band[reached]
 
     all_si, all_sj = subband[neighbours.i], subband[neighbours.j]
-    near = neighbours.d < attach_distance
+    near = np.flatnonzero(neighbours.d < attach_distance)  # indices gather faster than masks
     pi, pj = neighbours.i[near], neighbours.j[near]
     si, sj = all_si[near], all_sj[near]
-    keep = (si != sj) & (si != UNREACHED) & (sj != UNREACHED)
-    # touch[p, b]: point p has a point of sub-band b within λ (both directions of each pair).
-    touch = np.zeros((len(points), k), dtype=bool)
-    touch[pi[keep], sj[keep]] = True
-    touch[pj[keep], si[keep]] = True
+    cross = np.flatnonzero((si != sj) & (si != UNREACHED) & (sj != UNREACHED))
+    pi, pj, si, sj = pi[cross], pj[cross], si[cross], sj[cross]
+    # touch[p * k + b]: point p has a point of sub-band b within λ (both directions of
+    # each pair).
+    touch = np.zeros(len(points) * k, dtype=bool)
+    touch[pi * k + sj] = True
+    touch[pj * k + si] = True
     p, b = np.divmod(np.flatnonzero(touch), k)
     counts = np.bincount(subband[p] * k + b, minlength=k * k).reshape(k, k)
     attached = np.minimum(counts, counts.T) >= attach_points

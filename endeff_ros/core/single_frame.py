@@ -245,12 +245,19 @@ def _merge_close(points: npt.NDArray[np.float64], comp: npt.NDArray[np.intp],
                  dense: npt.NDArray[np.bool_], gap: float) -> npt.NDArray[np.intp]:
     """Join components whose closest points are nearer than ``gap`` (union-find over the
     few components; one KD-tree per component)."""
-    labels = np.unique(comp[dense])
-    if labels.size < 2 or gap <= 0:
+    if gap <= 0:
         return comp
-    members = [np.flatnonzero(dense & (comp == c)) for c in labels]
-    lo = np.array([points[m].min(axis=0) for m in members])
-    hi = np.array([points[m].max(axis=0) for m in members])
+    # The dense points grouped by component (a stable sort keeps each group's order).
+    idx = np.flatnonzero(dense)
+    order = np.argsort(comp[idx], kind='stable')
+    idx = idx[order]
+    starts = np.flatnonzero(np.r_[True, np.diff(comp[idx]) != 0]) if idx.size else idx
+    labels = comp[idx[starts]]
+    if labels.size < 2:
+        return comp
+    members = np.split(idx, starts[1:])
+    lo = np.minimum.reduceat(points[idx], starts, axis=0)
+    hi = np.maximum.reduceat(points[idx], starts, axis=0)
     parent = np.arange(labels.size)
 
     def find(x: int) -> int:
