@@ -24,7 +24,7 @@ from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.single_frame import estimate_frame
 from endeff_ros.core.tracker import Tracker
 from endeff_ros.core.types import KINECT_640 as K
-from endeff_ros.core.types import RGBDFrame
+from endeff_ros.core.types import Pixels, RGBDFrame
 
 CAMERA_HEIGHT = 1.1
 WALL_Z = 4.0  # inside the default box: without a background model it is foreground
@@ -485,8 +485,9 @@ def _strided(depth: np.ndarray):
     :func:`cloud.foreground_cloud` makes them."""
     z, valid = cloud._valid_pixels(depth, K, PARAMS.pixel_stride,
                                    (PARAMS.box_min_z, PARAMS.box_max_z), PARAMS.depth_median)
-    cols = cloud._columns(z, valid, K, PARAMS.pixel_stride)
-    return z, valid, cols, cloud._in_box(*cols, PARAMS)
+    pixels = Pixels.of(valid)
+    cols = cloud._columns(z, pixels, K, PARAMS.pixel_stride)
+    return z, pixels, cols, cloud._in_box(*cols, PARAMS)
 
 
 #: The solid angle of one strided pixel of ``K`` (what foreground_cloud gives the floor fit).
@@ -503,27 +504,27 @@ def test_only_a_plane_off_the_learnt_background_means_a_camera_raised_or_lowered
     for k in range(30):
         estimate_frame(frame(k, scene), PARAMS, background=model)
     up = np.array([0.0, -1.0, 0.0])
-    z, valid, cols, keep = _strided(frame(30, scene).depth)
+    z, pixels, cols, keep = _strided(frame(30, scene).depth)
     table = FloorPlane(up, CAMERA_HEIGHT - 0.75)
     assert np.count_nonzero(keep & (np.abs(table.heights(*cols)) < PARAMS.floor_distance)) > 200
-    assert not cloud._off_background(model, z, valid, cols, keep, PARAMS, table)
+    assert not cloud._off_background(model, z, pixels, cols, keep, PARAMS, table)
     monkeypatch.setattr(sys.modules[__name__], 'CAMERA_HEIGHT', 0.8)
     lowered = room().copy()
     add_table_top(lowered, -1.5, 1.5, 1.6, 3.4, 0.75)
-    z, valid, cols, keep = _strided(frame(31, lowered).depth)
-    assert cloud._off_background(model, z, valid, cols, keep, PARAMS, FloorPlane(up, 0.8))
+    z, pixels, cols, keep = _strided(frame(31, lowered).depth)
+    assert cloud._off_background(model, z, pixels, cols, keep, PARAMS, FloorPlane(up, 0.8))
     # Through the whole decision: the floor the lowered camera sees counts ...
     known = FloorPlane(up, 1.1)
-    check = functools.partial(cloud._off_background, model, z, valid, cols, keep, PARAMS)
+    check = functools.partial(cloud._off_background, model, z, pixels, cols, keep, PARAMS)
     moved = floor.moved_floor(known, cols, keep, PARAMS, PIXEL_AREA, check)
     assert moved is not None and abs(moved.offset - 0.8) < 0.03
     # ... the table's plane, the best one with the floor hidden, does not.
     monkeypatch.setattr(sys.modules[__name__], 'CAMERA_HEIGHT', 1.1)
-    z, valid, cols, keep = _strided(frame(32, scene).depth)
+    z, pixels, cols, keep = _strided(frame(32, scene).depth)
     above = keep & (table.heights(*cols) > -PARAMS.floor_distance)
     found = floor.moved_floor(known, cols, above, PARAMS, PIXEL_AREA, lambda plane: True)
     assert found is not None and abs(found.offset - table.offset) < 0.03
-    check = functools.partial(cloud._off_background, model, z, valid, cols, keep, PARAMS)
+    check = functools.partial(cloud._off_background, model, z, pixels, cols, keep, PARAMS)
     assert floor.moved_floor(known, cols, above, PARAMS, PIXEL_AREA, check) is None
 
 

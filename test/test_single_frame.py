@@ -631,6 +631,36 @@ def test_neighbours_are_every_pair_within_the_radius(monkeypatch, counting_sort)
     np.testing.assert_array_equal(nb.degree(), (full < radius).sum(axis=1) - 1)
 
 
+@pytest.mark.parametrize('kernel', [True, False])
+def test_neighbours_components_are_the_connected_parts_of_the_kept_pairs(monkeypatch, kernel):
+    from endeff_ros.core import bands
+
+    if not kernel:  # scipy's public connected_components gives the same labels
+        monkeypatch.setattr(bands, '_weak_components', None)
+    rng = np.random.default_rng(5)
+    points = rng.uniform(0, 0.5, (400, 3))
+    nb = Neighbours.build(points, 0.06)
+    keep = rng.random(len(nb.i)) < 0.5
+    labels = nb.components(keep)
+    # Reference: a union-find over the kept pairs.
+    parent = list(range(nb.n))
+
+    def find(a):
+        while parent[a] != a:
+            a = parent[a]
+        return a
+
+    for a, b in zip(nb.i[keep].tolist(), nb.j[keep].tolist()):
+        parent[find(a)] = find(b)
+    roots = np.array([find(a) for a in range(nb.n)])
+    same = roots[:, None] == roots[None, :]
+    np.testing.assert_array_equal(labels[:, None] == labels[None, :], same)
+    assert 1 < len(np.unique(labels)) < nb.n  # premise: some parts joined, not all
+    # Labels number the parts by their first point, as scipy's do.
+    _, first = np.unique(labels, return_index=True)
+    np.testing.assert_array_equal(labels[np.sort(first)], np.arange(len(first)))
+
+
 def test_split_subbands_separates_parallel_lines_farther_than_connect():
     connect = 0.07
     x = np.arange(0, 0.5, 0.01)

@@ -32,6 +32,12 @@ try:  # scipy's counting sort of COO entries by row (private; see group_rows)
     from scipy.sparse._sparsetools import coo_tocsr as _coo_tocsr
 except ImportError:  # pragma: no cover - depends on the scipy build
     _coo_tocsr = None
+try:  # the kernel of scipy's weak components (private; see Neighbours.components)
+    from scipy.sparse.csgraph._traversal import (
+        _connected_components_undirected as _weak_components,
+    )
+except ImportError:  # pragma: no cover - depends on the scipy build
+    _weak_components = None
 
 if TYPE_CHECKING:
     import numpy.typing as npt
@@ -65,9 +71,19 @@ class Neighbours:
         # Kept pairs by index: numpy gathers through an index array about four times faster
         # than through a boolean mask that keeps about half (docs/design.md, "Speed").
         kept = np.flatnonzero(keep)
+        i, j = self.i[kept], self.j[kept]
         indptr = np.zeros(self.n + 1, dtype=np.int32)
-        np.cumsum(np.bincount(self.i[kept], minlength=self.n), out=indptr[1:])
-        g = sparse.csr_matrix((np.ones(len(kept)), self.j[kept].astype(np.int32), indptr),
+        np.cumsum(np.bincount(i, minlength=self.n), out=indptr[1:])
+        if _weak_components is not None:
+            # What connected_components(directed=True, connection='weak') runs, given the
+            # transpose (rows j, columns i in order) from our counting sort instead of a
+            # validated matrix and its .T.tocsr(): half the cost, the same labels.
+            t_indptr, t_indices, _ = group_rows(self.n, j, i, self.d[kept])
+            labels = np.empty(self.n, dtype=np.int32)
+            _weak_components(j.astype(np.int32), indptr, t_indices.astype(np.int32),
+                             t_indptr.astype(np.int32), labels)
+            return labels
+        g = sparse.csr_matrix((np.ones(len(kept)), j.astype(np.int32), indptr),
                               shape=(self.n, self.n))
         return csgraph.connected_components(g, directed=True, connection='weak')[1]
 

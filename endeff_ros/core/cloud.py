@@ -29,7 +29,7 @@ from .floor import (
 )
 from .params import EndeffParams
 from .surfaces import beside_dropped, level_surface_points, wall_points
-from .types import Intrinsics
+from .types import Intrinsics, Pixels
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -71,7 +71,7 @@ def _backproject(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, stride
     """:func:`depth_to_points` as three (N,) columns x, y, z (the cheaper form: compressing
     1-D arrays is several times faster than (N, 3) rows)."""
     z, valid = _valid_pixels(depth, intrinsics, stride, z_range, median)
-    return _columns(z, valid, intrinsics, stride)
+    return _columns(z, Pixels.of(valid), intrinsics, stride)
 
 
 def _valid_pixels(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, stride: int,
@@ -102,18 +102,17 @@ def _valid_pixels(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, strid
     return z, valid
 
 
-def _columns(z: npt.NDArray[np.floating], valid: npt.NDArray[np.bool_],
-             intrinsics: Intrinsics, stride: int) -> Columns:
-    """x, y, z columns of the ``valid`` pixels of the strided depth image ``z``."""
+def _columns(z: npt.NDArray[np.floating], pixels: Pixels, intrinsics: Intrinsics,
+             stride: int) -> Columns:
+    """x, y, z columns of the ``pixels`` of the strided depth image ``z``."""
     h, w = intrinsics.height, intrinsics.width
-    px = np.flatnonzero(valid)  # an index array gathers faster than the mask, three times
-    zz = z.ravel()[px].astype(np.float64)
+    zz = pixels.read(z).astype(np.float64)
     # Pixel offsets from the principal point per column and row, broadcast over the image:
     # no pixel-coordinate arrays are materialised.
     du = np.arange(0, w, stride, dtype=np.float64) - intrinsics.cx
     dv = np.arange(0, h, stride, dtype=np.float64) - intrinsics.cy
-    x = np.broadcast_to(du[None, :], z.shape).ravel()[px] * zz / intrinsics.fx
-    y = np.broadcast_to(dv[:, None], z.shape).ravel()[px] * zz / intrinsics.fy
+    x = pixels.read(np.broadcast_to(du[None, :], z.shape)) * zz / intrinsics.fx
+    y = pixels.read(np.broadcast_to(dv[:, None], z.shape)) * zz / intrinsics.fy
     return x, y, zz
 
 
@@ -159,12 +158,12 @@ def _voxel_means(cols: Sequence[npt.NDArray[np.float64]],
 
 
 def _off_background(background: BackgroundModel, z_image: npt.NDArray[np.floating],
-                    valid: npt.NDArray[np.bool_], cols: Columns, keep: npt.NDArray[np.bool_],
+                    pixels: Pixels, cols: Columns, keep: npt.NDArray[np.bool_],
                     params: EndeffParams, plane: FloorPlane) -> bool:
     """True when most of ``plane``'s points inside the box (``keep``) differ in depth from
     ``background``'s (FLOOR_MOVED_CHANGED of those whose background is known)."""
-    on = np.zeros(valid.shape, dtype=bool)
-    on[valid] = keep & (np.abs(plane.heights(*cols)) < params.floor_distance)
+    on = pixels.image(keep & (np.abs(plane.heights(*cols)) < params.floor_distance), False,
+                      bool)
     changed = background.changed_fraction(z_image, on, params)
     return changed is not None and changed >= FLOOR_MOVED_CHANGED
 
@@ -202,7 +201,8 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
     """
     z_image, valid = _valid_pixels(depth, intrinsics, params.pixel_stride,
                                    (params.box_min_z, params.box_max_z), params.depth_median)
-    x, y, z = _columns(z_image, valid, intrinsics, params.pixel_stride)
+    pixels = Pixels.of(valid)
+    x, y, z = _columns(z_image, pixels, intrinsics, params.pixel_stride)
     keep = _in_box(x, y, z, params)
     if params.floor_removal:
         pixel_area = params.pixel_stride ** 2 / (intrinsics.fx * intrinsics.fy)
@@ -221,7 +221,7 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
                 moved = None
                 if len(near) < params.floor_min_fraction * n_inside:
                     off = None if background is None else functools.partial(
-                        _off_background, background, z_image, valid, (x, y, z), keep, params)
+                        _off_background, background, z_image, pixels, (x, y, z), keep, params)
                     moved = moved_floor(floor, (x, y, z), keep, params, pixel_area, off)
                 if moved is not None:  # the camera moved (see moved_floor)
                     floor = moved
@@ -232,29 +232,28 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
                     floor = follow_floor(floor, (x, y, z), near, n_inside, params)
             keep &= height > params.floor_distance
     if params.wall_min_area > 0:
-        keep &= ~wall_points(x, y, z, keep, valid, intrinsics, params)
+        keep &= ~wall_points(x, y, z, keep, pixels, intrinsics, params)
     beside = None
     if params.table_min_area > 0 and params.floor_removal and floor is not None:
-        level = level_surface_points((x, y, z), height, keep, valid, floor.normal, params)
+        level = level_surface_points((x, y, z), height, keep, pixels, floor.normal, params)
         if level.any():
             keep &= ~level
-            beside = beside_dropped(z, valid, level, keep)
+            beside = beside_dropped(z, pixels, level, keep)
     if background is not None:
         # The model sees every reading of the strided image (walls beyond the box included:
         # a person in front of them changed those pixels), and the box and floor as a mask.
-        candidate = np.zeros(valid.shape, dtype=bool)
-        candidate[valid] = keep
+        candidate = pixels.image(keep, False, bool)
         low = None
         if params.floor_removal and floor is not None:
-            low = np.zeros(valid.shape, dtype=bool)
-            low[valid] = keep & (height < FLOOR_BAND)
+            low = pixels.image(keep & (height < FLOOR_BAND), False, bool)
         z_image = np.where(z_image <= MAX_RANGE_M, z_image, 0)  # NaN compares False: 0 too
-        keep = background.foreground(z_image, candidate, stamp_ns, params, low=low,
-                                     color=color)[valid]
+        keep = pixels.read(background.foreground(z_image, candidate, stamp_ns, params,
+                                                 low=low, color=color))
     cols: tuple[npt.NDArray[np.float64], ...] = (x[keep], y[keep], z[keep])
     with_rgb = color is not None and params.color_edge_rgb > 0
     if with_rgb:
-        rgb = color[::params.pixel_stride, ::params.pixel_stride][valid][keep]
+        rgb = color[::params.pixel_stride, ::params.pixel_stride].reshape(-1, 3)[
+            pixels.index[keep]]
         cols += tuple(rgb[:, k].astype(np.float64) for k in range(3))
     if beside is not None:
         cols += (beside[keep].astype(np.float64),)  # a voxel is beside if any pixel is

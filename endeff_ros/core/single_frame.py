@@ -241,6 +241,11 @@ def _entities(points: npt.NDArray[np.float64], graph: Neighbours,
     return label
 
 
+#: :func:`_merge_close` compares two components' points pair by pair up to this many pairs
+#: (cheaper than building a KD-tree of the larger one).
+_MERGE_ALL_PAIRS = 20_000
+
+
 def _merge_close(points: npt.NDArray[np.float64], comp: npt.NDArray[np.intp],
                  dense: npt.NDArray[np.bool_], gap: float) -> npt.NDArray[np.intp]:
     """Join components whose closest points are nearer than ``gap`` (union-find over the
@@ -269,15 +274,27 @@ def _merge_close(points: npt.NDArray[np.float64], comp: npt.NDArray[np.intp],
     apart = ((lo[:, None, :] - hi[None, :, :] > gap).any(axis=2)
              | (lo[None, :, :] - hi[:, None, :] > gap).any(axis=2))
     trees: dict[int, cKDTree] = {}
+
+    def close(small: int, large: int) -> bool:
+        """A point of component ``small`` lies within the gap of one of ``large``: all
+        distances when there are few (a stray point against the body: no tree to build),
+        else the nearest one from a tree of ``large``."""
+        near = points[members[small]]
+        if len(near) * len(members[large]) <= _MERGE_ALL_PAIRS:
+            diff = points[members[large]][None] - near[:, None]
+            return bool((np.einsum('ijk,ijk->ij', diff, diff) < gap * gap).any())
+        if large not in trees:  # (the nearest distance does not depend on the tree's shape)
+            trees[large] = cKDTree(points[members[large]], balanced_tree=False,
+                                   compact_nodes=False)
+        d, _ = trees[large].query(near, distance_upper_bound=gap)
+        return bool(np.isfinite(d).any())
+
     for a, b in zip(*np.nonzero(np.triu(~apart, k=1))):
         a, b = int(a), int(b)
         ra, rb = find(a), find(b)
         if ra == rb:
             continue
-        small, large = (a, b) if len(members[a]) < len(members[b]) else (b, a)
-        tree = trees.setdefault(large, cKDTree(points[members[large]]))
-        d, _ = tree.query(points[members[small]], distance_upper_bound=gap)
-        if np.isfinite(d).any():
+        if close(*((a, b) if len(members[a]) < len(members[b]) else (b, a))):
             parent[max(ra, rb)] = min(ra, rb)
     roots = np.array([find(x) for x in range(labels.size)])
     remap = np.zeros(int(comp.max()) + 1, dtype=np.intp)

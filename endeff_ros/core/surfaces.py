@@ -17,29 +17,28 @@ if TYPE_CHECKING:
     import numpy.typing as npt
 
     from .params import EndeffParams
-    from .types import Columns, Intrinsics
+    from .types import Columns, Intrinsics, Pixels
 
 
-def beside_dropped(z: npt.NDArray[np.float64], valid: npt.NDArray[np.bool_],
+def beside_dropped(z: npt.NDArray[np.float64], pixels: Pixels,
                    dropped: npt.NDArray[np.bool_], keep: npt.NDArray[np.bool_]
                    ) -> npt.NDArray[np.bool_]:
     """Points of ``keep`` whose pixel lies within ``_BESIDE_PX`` strided pixels of a
     ``dropped`` point's pixel and not nearer than those by more than ``_BESIDE_STEP``: the
     table top hides what lies beyond it, so a body seen over it (or below its front edge)
     ends there, and that end is a cut, like the image border's; a body in front of the table
-    is not cut by it. ``z`` the points' depths, ``valid`` (H, W) the strided image's pixels
-    that became the points (in order); ``dropped`` and ``keep`` per point."""
+    is not cut by it. ``z`` the points' depths, ``pixels`` the strided image's pixels that
+    became the points; ``dropped`` and ``keep`` per point."""
     size = 2 * _BESIDE_PX + 1
     z = z.astype(np.float32)
-    image = np.full(valid.shape, np.inf, dtype=np.float32)
-    image[valid] = np.where(dropped, z, np.inf)
-    nearest = cv2.erode(image, np.ones((size, size), np.uint8))[valid]
+    image = pixels.image(np.where(dropped, z, np.inf), np.inf, np.float32)
+    nearest = pixels.read(cv2.erode(image, np.ones((size, size), np.uint8)))
     return keep & (z >= nearest - _BESIDE_STEP)
 
 
 def wall_points(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
                 z: npt.NDArray[np.float64], keep: npt.NDArray[np.bool_],
-                valid: npt.NDArray[np.bool_], intrinsics: Intrinsics,
+                pixels: Pixels, intrinsics: Intrinsics,
                 params: EndeffParams) -> npt.NDArray[np.bool_]:
     """Points of ``keep`` on planes (any orientation) that show at least
     ``params.wall_min_area`` square metres: walls, and above all a wall close behind a person,
@@ -52,12 +51,11 @@ def wall_points(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
     strided sample, refined by least squares; its area is the sum of its inlier pixels'
     footprints (the strided pixel's area at that depth, divided by the cosine between the
     viewing ray and the plane's normal, at most 1/0.2), counted per 8-connected stretch of
-    inlier pixels: only stretches of at least that area go. ``valid`` (H, W): the strided
-    image's pixels that became the points, in order.
+    inlier pixels: only stretches of at least that area go. ``pixels``: the strided image's
+    pixels that became the points.
     """
     out = np.zeros(len(z), dtype=bool)
     left = np.flatnonzero(keep)
-    pixel_of = np.flatnonzero(valid)  # point i is pixel pixel_of[i] of the strided image
     stride = params.pixel_stride
     pixel_area = (stride / intrinsics.fx) * (stride / intrinsics.fy)
     for _ in range(_WALL_PLANES):
@@ -86,7 +84,7 @@ def wall_points(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
         on = np.flatnonzero(np.abs(pts @ normal + offset) < tol)
         # Only connected stretches of the plane that are large themselves: a slab at a
         # person's depth also holds their torso and whatever stands beside them.
-        _, part = _stretches(pixel_of[left[on]], valid.shape)
+        _, part = _stretches(pixels.index[left[on]], pixels.shape)
         inliers = pts[on]
         area = np.bincount(part, weights=footprints(inliers, normal, pixel_area))
         big = area >= params.wall_min_area
@@ -106,7 +104,7 @@ def wall_points(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
 
 
 def level_surface_points(cols: Columns, height: npt.NDArray[np.float64],
-                         keep: npt.NDArray[np.bool_], valid: npt.NDArray[np.bool_],
+                         keep: npt.NDArray[np.bool_], pixels: Pixels,
                          up: npt.NDArray[np.float64], params: EndeffParams
                          ) -> npt.NDArray[np.bool_]:
     """Points of ``keep`` on level surfaces above the floor that cover at least
@@ -118,7 +116,7 @@ def level_surface_points(cols: Columns, height: npt.NDArray[np.float64],
     The floor gives the surfaces' normal, so a level is a peak of the points' ``height``
     (above the floor, aligned with the points ``cols``): for each of the ``_LEVELS`` densest
     levels at least ``_LEVEL_MIN_HEIGHT`` up, the points within ``floor_distance`` plus the
-    depth noise's ``0.005 z^2`` of it, per 8-connected stretch of their pixels (``valid``,
+    depth noise's ``0.005 z^2`` of it, per 8-connected stretch of their pixels (``pixels``,
     the strided image's pixels that became the points), are projected onto the level and
     counted in ``_WALL_CELL`` cells. The occupied cells are eroded by one cell: a level slab
     through upright things (a body, a wall, a shelf's side) projects to a thin curve, which
@@ -136,7 +134,7 @@ def level_surface_points(cols: Columns, height: npt.NDArray[np.float64],
     window[:-1] += window[1:]  # points within two bins: a level between two bin edges
     tol = step + _WALL_NOISE_Z2 * cols[2][idx] ** 2
     axes = plane_axes(up) / _WALL_CELL
-    pixel_of = np.flatnonzero(valid)[idx]
+    pixel_of = pixels.index[idx]
     min_cells = params.table_min_area / _WALL_CELL ** 2
     for _ in range(_LEVELS):
         b = int(np.argmax(window))
@@ -150,7 +148,7 @@ def level_surface_points(cols: Columns, height: npt.NDArray[np.float64],
         # The whole slab's inside bounds each stretch's: most frames end here.
         if np.count_nonzero(_cells_inside(cells)[0]) < min_cells:
             continue
-        n, part = _stretches(pixel_of[on], valid.shape)
+        n, part = _stretches(pixel_of[on], pixels.shape)
         for label in np.flatnonzero(np.bincount(part, minlength=n) >= min_cells):
             mine = np.flatnonzero(part == label)
             inside, at = _cells_inside(cells[mine])

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -18,6 +18,33 @@ if TYPE_CHECKING:
 
     #: x, y and z columns of N points (the back-projected pixels of Section 3).
     Columns = tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]
+
+
+class Pixels(NamedTuple):
+    """The pixels of a strided depth image that became points, in the points' order: the
+    image's ``shape`` (H, W) and each point's flat (row-major) pixel ``index``. Passed instead
+    of an (H, W) mask because numpy gathers and scatters through an index array several
+    times faster than through a boolean mask."""
+
+    shape: tuple[int, int]
+    index: npt.NDArray[np.intp]
+
+    @classmethod
+    def of(cls, valid: npt.NDArray[np.bool_]) -> Pixels:
+        """The ``True`` pixels of the (H, W) mask ``valid``."""
+        return cls(valid.shape, np.flatnonzero(valid))
+
+    def image(self, values: npt.ArrayLike, fill: float | bool, dtype: npt.DTypeLike,
+              ) -> npt.NDArray:
+        """An (H, W) image of ``dtype`` holding ``values`` (one per point, or one for all)
+        at the pixels and ``fill`` elsewhere."""
+        out = np.full(self.shape, fill, dtype=dtype)
+        out.reshape(-1)[self.index] = values
+        return out
+
+    def read(self, image: npt.NDArray) -> npt.NDArray:
+        """The values of an (H, W) ``image`` at the pixels (one per point)."""
+        return image.reshape(-1)[self.index]
 
 
 @dataclass(frozen=True)
