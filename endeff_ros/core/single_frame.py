@@ -249,7 +249,7 @@ _MERGE_ALL_PAIRS = 20_000
 def _merge_close(points: npt.NDArray[np.float64], comp: npt.NDArray[np.intp],
                  dense: npt.NDArray[np.bool_], gap: float) -> npt.NDArray[np.intp]:
     """Join components whose closest points are nearer than ``gap`` (union-find over the
-    few components; one KD-tree per component)."""
+    few components whose bounding boxes come that close; see ``close`` below)."""
     if gap <= 0:
         return comp
     # The dense points grouped by component (a stable sort keeps each group's order).
