@@ -637,6 +637,8 @@ def test_neighbours_components_are_the_connected_parts_of_the_kept_pairs(monkeyp
 
     if not kernel:  # scipy's public connected_components gives the same labels
         monkeypatch.setattr(bands, '_weak_components', None)
+    elif bands._weak_components is None:
+        pytest.skip("this scipy's weak-components kernel is missing or changed")
     rng = np.random.default_rng(5)
     points = rng.uniform(0, 0.5, (400, 3))
     nb = Neighbours.build(points, 0.06)

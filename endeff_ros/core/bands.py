@@ -39,6 +39,26 @@ try:  # the kernel of scipy's weak components (private; see Neighbours.component
 except ImportError:  # pragma: no cover - depends on the scipy build
     _weak_components = None
 
+
+def _kernel_works() -> bool:
+    """Whether the private kernel takes the arguments Neighbours.components gives it and
+    labels a small graph as the public call does (its signature is scipy's to change)."""
+    # Pairs 0-1 and 2-3 of five points: parts {0, 1}, {2, 3}, {4}, labelled 0, 1, 2.
+    indptr = np.array([0, 1, 1, 2, 2, 2], dtype=np.int32)
+    indices = np.array([1, 3], dtype=np.int32)
+    t_indptr = np.array([0, 0, 1, 1, 2, 2], dtype=np.int32)
+    t_indices = np.array([0, 2], dtype=np.int32)
+    labels = np.empty(5, dtype=np.int32)
+    try:
+        _weak_components(indices, indptr, t_indices, t_indptr, labels)
+    except (TypeError, ValueError):  # pragma: no cover - depends on the scipy build
+        return False
+    return labels.tolist() == [0, 0, 1, 1, 2]
+
+
+if _weak_components is not None and not _kernel_works():  # pragma: no cover
+    _weak_components = None
+
 if TYPE_CHECKING:
     import numpy.typing as npt
 
