@@ -866,6 +866,76 @@ def test_find_end_effectors_on_a_y_graph():
         assert len(path) == round(length / 0.1) + 1
 
 
+def _limb_with_slivers(tip_sizes):
+    """A root and one straight 0.6 m limb (nodes every 0.1 m, 10 points each) that runs on
+    0.2 m and 0.23 m past its last node through two more nodes of ``tip_sizes`` points (a
+    surface seen edge-on). Returns the graph, the limb's last node and the outermost node."""
+    centroids, edges = [np.zeros(3)], []
+    last = _limb(centroids, edges, 0, (0, 1, 0), 0.6)
+    centroids.append(centroids[last] + [0.0, 0.2, 0.0])
+    edges.append((last, len(centroids) - 1))
+    centroids.append(centroids[-1] + [0.0, 0.03, 0.0])
+    edges.append((len(centroids) - 2, len(centroids) - 1))
+    g = make_graph(centroids, edges)
+    sizes = np.full(len(centroids), 10, dtype=np.intp)
+    sizes[-2:] = tip_sizes
+    return dataclasses.replace(g, sizes=sizes), last, len(centroids) - 1
+
+
+@pytest.mark.parametrize('tip_sizes, moved', [((1, 2), True), ((2, 3), True),
+                                              ((3, 3), False), ((1, 6), False)])
+def test_an_end_that_is_a_sliver_moves_back_to_its_part(tip_sizes, moved):
+    g, last, outer = _limb_with_slivers(tip_sizes)
+    extremes = []
+    found = find_end_effectors(g, 0, min_geodesic=0.3, max_count=12, tip_depth=0.14,
+                               min_tip_points=6, extremes=extremes)
+    node, path, protrusion = found[0]
+    # The extreme decides g and is reported as such; the end is the limb's last node when
+    # the two outer nodes (both within tip_depth of the outermost) hold fewer than 6 points.
+    assert extremes[0] == outer
+    assert protrusion == pytest.approx(0.83)
+    assert node == (last if moved else outer)
+    assert path[0] == node and path[-1] == 0
+    # Off (the default of the function): the extreme.
+    assert find_end_effectors(g, 0, min_geodesic=0.3, max_count=12)[0][0] == outer
+
+
+def test_a_branch_of_slivers_keeps_its_extreme():
+    """Walking back would reach the root (the target set): the end stays where it is."""
+    centroids, edges = [np.zeros(3)], []
+    _limb(centroids, edges, 0, (0, 1, 0), 0.5)
+    g = make_graph(centroids, edges)
+    g = dataclasses.replace(g, sizes=np.r_[10, np.ones(len(centroids) - 1, dtype=np.intp)])
+    extremes = []
+    found = find_end_effectors(g, 0, min_geodesic=0.3, max_count=12, tip_depth=0.14,
+                               min_tip_points=6, extremes=extremes)
+    assert [f[0] for f in found] == extremes == [len(centroids) - 1]
+
+
+def test_a_sliver_on_the_image_border_cuts_the_end_moved_back_from_it():
+    """drop_cut_ends checks the sliver an end was moved back from, not only its node."""
+    from endeff_ros.core.single_frame import EntityEstimate, FrameEstimate, drop_cut_ends
+    from endeff_ros.core.types import Candidate
+
+    # Two points: node 0 in the middle of the image, node 1 on its left border.
+    points = np.array([[0.0, 0.0, 2.0], [-1.3, 0.0, 2.0]])
+    subband = np.array([0, 1])
+    params = EndeffParams()
+
+    def estimate(extreme):
+        c = Candidate(position=points[0], node=0, geodesic=1.0, geodesic_approx=1.0,
+                      path=points[:1], extreme=extreme)
+        e = EntityEstimate(entity=0, root=points[0], candidates=[c], graph=None,
+                           point_index=np.arange(2))
+        return FrameEstimate(points=points, band=np.zeros(2, np.intp), subband=subband,
+                             entity=np.zeros(2, np.intp), entities=[e], unreachable=0)
+
+    u = KINECT_640.fx * points[1, 0] / points[1, 2] + KINECT_640.cx
+    assert u < params.cut_margin_px  # premise: node 1 is on the border
+    assert len(drop_cut_ends(estimate(None), KINECT_640, params).entities[0].candidates) == 1
+    assert len(drop_cut_ends(estimate(1), KINECT_640, params).entities[0].candidates) == 0
+
+
 @pytest.mark.parametrize('min_geodesic, max_count, expected', [
     (0.55, 12, ['a', 'b']),         # c (0.5 m from the found paths) is below g
     (0.15, 12, ['a', 'b', 'c', 'twig']),

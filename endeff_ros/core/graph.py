@@ -194,7 +194,8 @@ def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
                        max_count: int, chain_geodesic: float | None = None,
                        chain_subbands: int = 3, chain_min_points: int = 1,
                        loop_sides: list[bool] | None = None, scale_length: float = 0.0,
-                       scale_min: float = 1.0,
+                       scale_min: float = 1.0, tip_depth: float = 0.0,
+                       min_tip_points: int = 0, extremes: list[int] | None = None,
                        ) -> list[tuple[int, npt.NDArray[np.intp], float]]:
     """Iterated Dijkstra with zero-weight edges along each found path (Baak et al.).
 
@@ -223,6 +224,13 @@ def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
     ``loop_sides``: a list that receives, per end-effector returned, whether it is the far
     side of a loop (:func:`_loop_far_side`); None: not asked.
 
+    Slivers: with ``min_tip_points`` > 0, an extreme whose terminal part (the sub-bands on
+    its path within ``tip_depth``) holds fewer points is a sliver, and the end-effector is
+    the first node back along its path whose terminal part holds as many
+    (:func:`_solid_tip`); the extreme still decides g, loops and the zero-weight path.
+    ``extremes``: a list that receives, per end-effector returned, its extreme (the node
+    itself unless a sliver moved it); None: not asked.
+
     Relative thresholds: once the first (farthest) end is found, its geodesic distance L
     measures the entity; below ``scale_length`` g and the chain threshold shrink by
     L / ``scale_length``, to ``scale_min`` of their values at least. Why: g in metres suits one
@@ -250,16 +258,51 @@ def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
                                    chain_min_points)
             if node < 0:
                 break
-        found.append((node, path_to_sources(pred_root, node), float(dist[node])))
+        extreme = node
+        if min_tip_points > 0:
+            node = _solid_tip(graph, extreme, dist, pred, tip_depth, min_tip_points)
+        found.append((node, path_to_sources(pred_root, node), float(dist[extreme])))
+        if extremes is not None:
+            extremes.append(extreme)
         if len(found) == 1 and scale_length > 0:
-            shrink = min(1.0, max(scale_min, float(dist[node]) / scale_length))
+            shrink = min(1.0, max(scale_min, float(dist[extreme]) / scale_length))
             min_geodesic, low = min_geodesic * shrink, low * shrink
         if loop_sides is not None:
             loop_sides.append(len(sources) > 1
-                              and _loop_far_side(graph, node, dist, pred, min_geodesic))
+                              and _loop_far_side(graph, extreme, dist, pred, min_geodesic))
         # Zero-weight edges from every node of the new path to the target: add them as sources.
-        sources.extend(path_to_sources(pred, node)[:-1].tolist())
+        sources.extend(path_to_sources(pred, extreme)[:-1].tolist())
     return found
+
+
+def _solid_tip(graph: TopologyGraph, extreme: int, dist: npt.NDArray[np.float64],
+               pred: npt.NDArray[np.intp], depth: float, min_points: int) -> int:
+    """The end-effector's node for ``extreme`` (``dist``, ``pred``: distances and
+    predecessors towards the target set): the extreme when the sub-bands on its path within
+    ``depth`` of it hold at least ``min_points`` points, else the first node back along the
+    path whose own such stretch does; the extreme again when that would reach the target set
+    (an end on an earlier path or at the root; nor do the target set's nodes count in a
+    stretch: a branch of slivers off the root is no part next to the root).
+
+    Why: a surface seen edge-on breaks into sub-bands of one or two points, and a path can
+    run on through them past the part it leaves: a foot seen from the side, behind a table,
+    whose path continued up through a few points of the far leg and put the end 0.2 m up
+    the shin. A part's end holds a few points within ``tip_depth`` even where its outermost
+    sub-band is below the sub-band minimum (a hand's often is: asking each sub-band for the
+    minimum moved hands up the forearm, docs/results.md)."""
+    tip = extreme
+    while True:
+        # The nodes of the stretch, the target set's excluded (they are other paths' parts).
+        points, node = 0, tip
+        while node >= 0 and pred[node] >= 0 and dist[tip] - dist[node] <= depth:
+            points += int(graph.sizes[node])
+            node = int(pred[node])
+        if points >= min_points:
+            return tip
+        nxt = int(pred[tip])
+        if nxt < 0 or pred[nxt] < 0:  # the target set is next (or reached)
+            return extreme
+        tip = nxt
 
 
 def _loop_far_side(graph: TopologyGraph, node: int, dist: npt.NDArray[np.float64],

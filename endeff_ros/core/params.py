@@ -160,6 +160,11 @@ class EndeffParams:
     tip_depth: float = _p(0.14, 'Geodesic depth of the terminal part behind its extreme: '
                           'its points give the part radius, axis and centre.', unit='m',
                           lo=0.0, hi=1.0)
+    min_tip_points: int = _p(4, 'An extreme whose terminal part (tip_depth deep) holds fewer '
+                             'points is a sliver (a surface seen edge-on that the path ran '
+                             'on through): the end-effector is the first sub-band back along '
+                             'its path whose terminal part holds this many; 0 = off.',
+                             lo=0, hi=1000)
 
     max_part_radius: float = _p(0.1, 'Cap on the terminal-part radius used to move the '
                                 'end-effector from the visible surface to the part centre; '
@@ -271,13 +276,14 @@ NODE_NAME = 'endeff_node'
 
 #: Named parameter sets shipped as ``config/endeff_<name>.yaml`` (besides ``config/endeff.yaml``,
 #: the defaults). ``fast``: 4 cm voxels (932 instead of 1394 points on the benchmark frame),
-#: the sub-band sizes scaled with the voxel area; δ_L and λ unchanged. It trades some accuracy
-#: for about 0.7x the time per frame (docs/results.md), and its 4 cm cells are too coarse for
-#: the 5 cm tip tests on the unit-test shapes, so it is not the default. Its smaller sub-bands
-#: cut a limb into more pieces, so a chain below g needs 4 sub-bands (docs/design.md).
+#: the sub-band sizes and the sliver threshold scaled with the voxel area; δ_L and λ
+#: unchanged. It trades some accuracy for about 0.7x the time per frame (docs/results.md),
+#: and its 4 cm cells are too coarse for the 5 cm tip tests on the unit-test shapes, so it is
+#: not the default. Its smaller sub-bands cut a limb into more pieces, so a chain below g
+#: needs 4 sub-bands (docs/design.md).
 PRESETS: dict[str, dict[str, Any]] = {
     'fast': {'voxel_size': 0.04, 'subband_max_points': 34, 'subband_min_points': 4,
-             'chain_subbands': 4},
+             'min_tip_points': 2, 'chain_subbands': 4},
 }
 
 

@@ -127,8 +127,10 @@ def drop_cut_ends(estimate: FrameEstimate, intrinsics: Intrinsics,
     cut = cut_nodes(estimate.points, estimate.subband, intrinsics, params, estimate.cut)
     if not cut.size or not any(e.candidates for e in estimate.entities):
         return estimate
-    entities = [dataclasses.replace(e, candidates=[c for c in e.candidates
-                                                   if not np.isin(c.node, cut)])
+    def is_cut(c: Candidate) -> bool:  # its node, or the sliver it was moved back from
+        return bool(np.isin([c.node, c.node if c.extreme is None else c.extreme], cut).any())
+
+    entities = [dataclasses.replace(e, candidates=[c for c in e.candidates if not is_cut(c)])
                 for e in estimate.entities]
     return dataclasses.replace(estimate, entities=entities)
 
@@ -176,6 +178,7 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
     found = []  # (entity, node, path, protrusion) of every end-effector in the frame
     # Per found extreme: on the far side of a loop (asked only with loop_far_sides).
     sides: list[bool] | None = [] if params.loop_far_sides else None
+    extremes: list[int] = []  # per end-effector, its extreme (the node unless a sliver)
     for e, seed in enumerate(seeds):
         root_node = int(subband[seed])
         found += [(e, *f) for f in find_end_effectors(graph, root_node,
@@ -186,21 +189,25 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
                                                        max_count=params.max_end_effectors,
                                                        loop_sides=sides,
                                                        scale_length=params.scale_length,
-                                                       scale_min=params.scale_min)]
+                                                       scale_min=params.scale_min,
+                                                       tip_depth=params.tip_depth,
+                                                       min_tip_points=params.min_tip_points,
+                                                       extremes=extremes)]
     dist_root = [graph.dist[subband[seeds[e]], path] for e, _, path, _ in found]
     positions, shifts, widths = _tip_positions(points, subband, graph, [f[2] for f in found],
                                                dist_root, params)
     candidates: list[list[Candidate]] = [[] for _ in seeds]
     loop_sides: list[list[Candidate]] = [[] for _ in seeds]
-    for (e, node, path, protrusion), side, position, shift, width in zip(
-            found, sides or [False] * len(found), positions, shifts, widths):
+    for (e, node, path, protrusion), side, extreme, position, shift, width in zip(
+            found, sides or [False] * len(found), extremes, positions, shifts, widths):
         if _broad_corner(protrusion, width, params):
             continue
         root = points[seeds[e]]
         (loop_sides if side else candidates)[e].append(Candidate(
             position=position, node=node, geodesic=geodesic(graph, path),
             geodesic_approx=approximate_geodesic(position - shift, graph, path, root),
-            path=graph.centroids[path], protrusion=protrusion, centre_shift=shift))
+            path=graph.centroids[path], protrusion=protrusion, centre_shift=shift,
+            extreme=None if extreme == node else extreme))
     entities = [EntityEstimate(entity=e, root=points[seed], candidates=candidates[e],
                                graph=graph, point_index=np.flatnonzero(entity == e),
                                root_node=int(subband[seed]), loop_sides=loop_sides[e])

@@ -134,7 +134,9 @@ class Candidate:
     Dijkstra found it (compared with g). ``position`` is the centre of the terminal part;
     ``centre_shift`` leads to it along the part's axis from the centre of its rounded end (one
     radius inside the extreme), the point the tracker follows: zero for a round end such as a
-    head, up to one part radius for a long one such as a hand.
+    head, up to one part radius for a long one such as a hand. ``extreme`` is the graph node
+    the path ended at when that was a sliver and ``node`` lies back along the path (None: the
+    node itself); a cut there cuts the candidate too.
     """
 
     position: npt.NDArray[np.float64]
@@ -144,6 +146,7 @@ class Candidate:
     path: npt.NDArray[np.float64]
     protrusion: float = 0.0
     centre_shift: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    extreme: int | None = None
 
     @property
     def end_centre(self) -> npt.NDArray[np.float64]:
