@@ -453,7 +453,8 @@ class BackgroundModel:
         if reference is None:
             return None
         diff = cv2.absdiff(grey, reference[1])
-        counts = np.bincount(diff.ravel(), minlength=256)
+        # The grey-level histogram (exact counts; a third of np.bincount's time on uint8).
+        counts = cv2.calcHist([diff], [0], None, [256], [0, 256]).ravel().astype(np.int64)
         median = int(np.searchsorted(np.cumsum(counts), diff.size / 2))
         stirred = diff > max(COLOR_MIN_STEP, COLOR_NOISE_K * 1.4826 * median)
         # Where the depth turned farther, something left: its colour change is not the
@@ -725,7 +726,9 @@ class BackgroundModel:
                 else np.asarray(detected, dtype=bool).reshape(-1))[ok]
         hit = self._track_labels(labels, uv)
         if hit.any():
-            self._near_since[np.isin(labels, hit[hit > 0])] = self._t
+            on_track = np.zeros(int(labels.max()) + 1, dtype=bool)  # per label (np.isin, faster)
+            on_track[hit[hit > 0]] = True
+            self._near_since[np.take(on_track, labels)] = self._t
         if not self.learning:
             moving = self._moving_labels
             on_moving = (hit > 0) & (hit < len(moving)) & moving[np.minimum(hit, len(moving) - 1)]
