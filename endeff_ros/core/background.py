@@ -726,7 +726,8 @@ class BackgroundModel:
                 else np.asarray(detected, dtype=bool).reshape(-1))[ok]
         hit = self._track_labels(labels, uv)
         if hit.any():
-            on_track = np.zeros(int(labels.max()) + 1, dtype=bool)  # per label (np.isin, faster)
+            # A lookup table per label: faster than np.isin over the whole image.
+            on_track = np.zeros(int(labels.max()) + 1, dtype=bool)
             on_track[hit[hit > 0]] = True
             self._near_since[np.take(on_track, labels)] = self._t
         if not self.learning:

@@ -252,8 +252,7 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
     cols: tuple[npt.NDArray[np.float64], ...] = (x[keep], y[keep], z[keep])
     with_rgb = color is not None and params.color_edge_rgb > 0
     if with_rgb:
-        rgb = color[::params.pixel_stride, ::params.pixel_stride].reshape(-1, 3)[
-            pixels.index[keep]]
+        rgb = pixels.read(color[::params.pixel_stride, ::params.pixel_stride])[keep]
         cols += tuple(rgb[:, k].astype(np.float64) for k in range(3))
     if beside is not None:
         cols += (beside[keep].astype(np.float64),)  # a voxel is beside if any pixel is

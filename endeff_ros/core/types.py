@@ -43,8 +43,8 @@ class Pixels(NamedTuple):
         return out
 
     def read(self, image: npt.NDArray) -> npt.NDArray:
-        """The values of an (H, W) ``image`` at the pixels (one per point)."""
-        return image.reshape(-1)[self.index]
+        """The values of an (H, W) or (H, W, C) ``image`` at the pixels (one per point)."""
+        return image.reshape((-1, *image.shape[2:]))[self.index]
 
 
 @dataclass(frozen=True)
