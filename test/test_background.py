@@ -202,6 +202,18 @@ def test_dropouts_bridge_only_where_the_readings_around_agree():
     assert not joined[1, 3] and bridged[1, 3] == 0  # between 2.05 and 3.0: no bridge
 
 
+def test_a_dropout_on_the_image_border_is_bridged_only_from_inside():
+    """Beyond the image border nothing is masked: a border pixel without a reading and
+    without a masked neighbour stays out (no depth of 3.4e38 from a finite border value);
+    one beside a masked pixel is bridged as anywhere else."""
+    depth = np.zeros((4, 4), np.float32)
+    depth[2, 2] = 2.0
+    bridged, joined = bridge_dropouts(depth, depth > 0)
+    assert not joined[0, 0] and bridged[0, 0] == 0
+    assert not joined[:, 0].any() and not joined[0].any()
+    assert joined[3, 3] and bridged[3, 3] == np.float32(2.0)
+
+
 def test_furniture_stays_background_when_a_person_stands_beside_it():
     """A person walks up to the chair and touches it in the image at nearly its depth: their
     components join, but the chair, certified static before, stays background."""

@@ -120,8 +120,11 @@ def bridge_dropouts(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_],
     ``BRIDGE_STEP`` takes the nearest of their depths and joins the mask (not between a
     person and what stands behind them, whose depths disagree)."""
     box = np.ones((3, 3), np.uint8)
+    # Outside the image nothing is masked: OpenCV's default border (the float maximum, which
+    # is finite) would bridge a border dropout without a masked neighbour to 3.4e38.
     near = cv2.erode(np.where(mask, depth, np.float32(np.inf)).astype(np.float32, copy=False),
-                     box)
-    far = cv2.dilate(np.where(mask, depth, np.float32(0)).astype(np.float32, copy=False), box)
+                     box, borderType=cv2.BORDER_CONSTANT, borderValue=np.inf)
+    far = cv2.dilate(np.where(mask, depth, np.float32(0)).astype(np.float32, copy=False), box,
+                     borderType=cv2.BORDER_CONSTANT, borderValue=0)
     fill = (depth <= 0) & np.isfinite(near) & (far - near <= np.float32(BRIDGE_STEP))
     return np.where(fill, near, depth).astype(np.float32, copy=False), mask | fill
