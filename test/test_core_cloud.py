@@ -14,15 +14,20 @@ import numpy as np
 import pytest
 
 from endeff_ros.core.cloud import (
+    FILL_AGREE_M,
+    FILL_AGREE_PER_M,
+    FILL_MIN_READINGS,
     MAX_RANGE_M,
     box_mask,
     depth_to_points,
+    fill_dropouts,
     foreground_cloud,
     voxel_downsample,
 )
 from endeff_ros.core.errors import InputError, ParameterError
 from endeff_ros.core.floor import FloorPlane, fit_floor
 from endeff_ros.core.params import EndeffParams
+from endeff_ros.core.single_frame import estimate_points
 from endeff_ros.core.types import KINECT_640, Intrinsics, RGBDFrame
 from endeff_ros.ros.convert import depth_image_to_array
 from endeff_ros.synth import scenes
@@ -531,3 +536,133 @@ def test_foreground_points_carry_their_pixels_mean_colour():
     np.testing.assert_allclose(cols.sum(axis=1), 255.0)  # the line's voxels mix the two
     off = params.replace(color_edge_rgb=0.0)
     assert foreground_cloud(depth, KINECT_640, off, color=color).colors is None
+
+
+# ---------------------------------------------------------------------------------------------
+# fill_dropouts
+# ---------------------------------------------------------------------------------------------
+
+def _fill_reference(depth, stride):
+    """fill_dropouts written out pixel by pixel (float64): the definition it must match."""
+    d = np.asarray(depth, dtype=np.float64)
+    ok = np.isfinite(d) & (d > 0) & (d <= MAX_RANGE_M)
+    z = d[::stride, ::stride].copy()
+
+    def block(v, u):  # readings in the block that strided pixel (v, u) starts
+        if not (0 <= v < z.shape[0] and 0 <= u < z.shape[1]):
+            return 0
+        return int(ok[v * stride:(v + 1) * stride, u * stride:(u + 1) * stride].sum())
+
+    for v in range(z.shape[0]):
+        for u in range(z.shape[1]):
+            if z[v, u] > 0:
+                continue
+            rows = slice(max(0, (v - 1) * stride), (v + 2) * stride)
+            cols = slice(max(0, (u - 1) * stride), (u + 2) * stride)
+            readings = d[rows, cols][ok[rows, cols]]
+            if len(readings) < FILL_MIN_READINGS:
+                continue
+            inside = any(block(v + a, u + b) and block(v - a, u - b)
+                         for a, b in ((0, 1), (1, 0), (1, 1), (1, -1)))
+            scattered = max(block(v + a, u + b) for a in (-1, 0, 1)
+                            for b in (-1, 0, 1)) <= stride * stride / 2
+            if not (inside or scattered):
+                continue
+            tol = 0.5 * (FILL_AGREE_M + FILL_AGREE_PER_M * readings.mean())
+            if readings.std() <= tol:
+                z[v, u] = readings.mean()
+    return z
+
+
+@pytest.mark.parametrize(('stride', 'shape'), [(2, (24, 32)), (2, (23, 31)), (3, (20, 25)),
+                                               (1, (12, 16))])
+def test_fill_dropouts_matches_its_definition(stride, shape):
+    """Random sparse surfaces at a few depths, with every kind of no-reading (NaN, 0, inf,
+    negative, beyond the range), odd image sizes included: filled exactly as the pixel-by-pixel
+    definition fills (the mean of the 3 x 3 blocks' readings when at least two agree, inside
+    the surface or where its readings are scattered)."""
+    rng = np.random.default_rng(stride * 100 + shape[1])
+    depth = rng.choice([1.5, 2.5, 4.0], size=shape).astype(np.float32)
+    depth = np.repeat(np.repeat(depth[::8, ::8], 8, axis=0), 8, axis=1)[:shape[0], :shape[1]]
+    depth = depth + rng.normal(0, 0.004, shape).astype(np.float32)
+    drop = rng.random(shape)
+    depth[drop < 0.55] = np.nan
+    depth[(drop >= 0.55) & (drop < 0.6)] = 0
+    depth[(drop >= 0.6) & (drop < 0.62)] = np.inf
+    depth[(drop >= 0.62) & (drop < 0.63)] = -1
+    depth[(drop >= 0.63) & (drop < 0.64)] = MAX_RANGE_M + 5
+    got = fill_dropouts(depth, stride)
+    want = _fill_reference(depth, stride)
+    assert got.shape == depth[::stride, ::stride].shape and got.dtype == np.float32
+    filled = ~(depth[::stride, ::stride] > 0) & (got > 0)
+    assert np.array_equal(filled, ~(depth[::stride, ::stride] > 0) & (want > 0))
+    assert filled.any()
+    np.testing.assert_allclose(got[filled], want[filled], atol=2e-5)
+    kept = depth[::stride, ::stride] > 0  # readings are never changed (inf and beyond too)
+    assert np.array_equal(got[kept], depth[::stride, ::stride][kept])
+
+
+def test_fill_dropouts_rebuilds_a_sparse_surface_but_not_across_a_depth_edge():
+    """A ToF-like surface read in one pixel of ten: the strided image keeps a tenth of its
+    pixels, the filled one most of them, each at the surface's depth; beside it a surface
+    0.5 m farther: no pixel takes a depth between the two."""
+    rng = np.random.default_rng(3)
+    depth = np.full((120, 160), 4.0, dtype=np.float32)
+    depth[:, 80:] = 4.5
+    depth += rng.normal(0, 0.005, depth.shape).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.9] = np.nan
+    raw = depth[::2, ::2]
+    got = fill_dropouts(depth, 2)
+    assert np.count_nonzero(raw > 0) < 0.15 * raw.size
+    assert np.count_nonzero(got > 0) > 0.6 * got.size
+    near, far = got[:, :39], got[:, 41:]
+    assert np.all(np.abs(near[near > 0] - 4.0) < 0.02)
+    assert np.all(np.abs(far[far > 0] - 4.5) < 0.02)
+    between = (got > 4.05) & (got < 4.45)
+    assert not between.any()
+
+
+def test_fill_dropouts_needs_two_readings():
+    """One reading in a window is no surface: nothing around it is filled; two scattered
+    readings that agree are."""
+    depth = np.full((12, 12), np.nan, dtype=np.float32)
+    depth[5, 5] = 2.0
+    got = fill_dropouts(depth, 2)
+    assert np.count_nonzero(got > 0) == 0
+    depth[6, 7] = 2.01
+    got = fill_dropouts(depth, 2)
+    assert np.count_nonzero(got > 0) > 0
+    np.testing.assert_allclose(got[got > 0], 2.005, atol=1e-5)
+
+
+def test_fill_dropouts_does_not_grow_a_solid_outline():
+    """A part read in full against no reading at all (a background the sensor or the
+    recording left out): its outline's neighbours are not filled, holes inside it are."""
+    depth = np.full((40, 40), np.nan, dtype=np.float32)
+    depth[10:30, 10:30] = 2.0
+    depth[20, 20] = np.nan  # a hole, at a strided pixel
+    got = fill_dropouts(depth, 2)
+    assert got[10, 10] == np.float32(2.0)  # the hole
+    outline = (got > 0) & ~(depth[::2, ::2] > 0)
+    assert np.count_nonzero(outline) == 1
+
+
+def test_a_sparse_part_keeps_its_entity_with_dropouts_filled():
+    """A block 0.3 x 0.8 m at 4 m that the sensor reads in one pixel of ten: from the raw
+    strided image its points are too sparse for the density test (Eq. 3) and no entity is
+    left; with ``dropout_fill`` (the default) it is one entity again."""
+    k = Intrinsics(365.5, 365.5, 255.5, 211.5, 512, 424)
+    rng = np.random.default_rng(5)
+    depth = np.full((424, 512), np.nan, dtype=np.float32)
+    u0, u1 = int(255.5 - 0.15 * 365.5 / 4), int(255.5 + 0.15 * 365.5 / 4)
+    v0, v1 = int(211.5 - 0.4 * 365.5 / 4), int(211.5 + 0.4 * 365.5 / 4)
+    depth[v0:v1, u0:u1] = 4.0 + rng.normal(0, 0.005, (v1 - v0, u1 - u0))
+    depth[rng.random(depth.shape) < 0.9] = np.nan
+    params = EndeffParams(floor_removal=False, background=False, wall_min_area=0.0,
+                          table_min_area=0.0)
+    entities = {}
+    for fill in (False, True):
+        p = params.replace(dropout_fill=fill)
+        cloud = foreground_cloud(depth, k, p)
+        entities[fill] = len(estimate_points(cloud.points, p).entities)
+    assert entities == {False: 0, True: 1}

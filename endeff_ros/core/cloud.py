@@ -39,6 +39,14 @@ if TYPE_CHECKING:
     from .background import BackgroundModel
     from .types import Columns
 
+#: :func:`fill_dropouts`: at least this many readings in the window, and their standard
+#: deviation at most half of ``FILL_AGREE_M`` plus ``FILL_AGREE_PER_M`` times their depth (two
+#: readings at most that far apart: 2 cm plus sensor noise, which grows with depth, and the
+#: slope of a surface seen obliquely across the window).
+FILL_MIN_READINGS = 2
+FILL_AGREE_M = 0.02
+FILL_AGREE_PER_M = 0.01
+
 #: Depth beyond this many metres is treated as no reading (no RGB-D sensor of this class
 #: measures farther; it also catches garbage such as 65535 mm).
 MAX_RANGE_M = 20.0
@@ -75,10 +83,11 @@ def _backproject(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, stride
 
 
 def _valid_pixels(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, stride: int,
-                  z_range: tuple[float, float], median: bool,
+                  z_range: tuple[float, float], median: bool, fill: bool = False,
                   ) -> tuple[npt.NDArray[np.floating], npt.NDArray[np.bool_]]:
-    """The strided (and optionally median-filtered) depth image and its pixels within
-    ``z_range``, both (H / stride, W / stride), after checking the input."""
+    """The strided depth image (its dropouts filled, :func:`fill_dropouts`, if ``fill``;
+    then median-filtered if ``median``) and its pixels within ``z_range``, both
+    (H / stride, W / stride), after checking the input."""
     if depth.ndim != 2:
         msg = f'depth must be 2-D, got shape {depth.shape}'
         raise InputError(msg)
@@ -90,7 +99,7 @@ def _valid_pixels(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, strid
     if not np.issubdtype(depth.dtype, np.floating):
         msg = f'depth must be float metres, got dtype {depth.dtype} (convert 16UC1 mm first)'
         raise InputError(msg)
-    z = depth[::stride, ::stride]
+    z = fill_dropouts(depth, stride) if fill else depth[::stride, ::stride]
     if median:
         # 3x3 median (no reading = 0): removes flying pixels and halves the depth noise that
         # thickens surfaces into several voxel layers; a pixel with <= 4 readings around it
@@ -100,6 +109,81 @@ def _valid_pixels(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, strid
     with np.errstate(invalid='ignore'):
         valid = (z >= lo) & (z <= hi)  # NaN compares False
     return z, valid
+
+
+def _between_readings(seen: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+    """Per block of ``seen`` (H, W: blocks with a reading): whether two opposite neighbours
+    (left and right, above and below, or a diagonal's two ends) both have readings, i.e. the
+    block lies inside a surface, not beside its outline (there, the readings all lie on one
+    side and the block would extend the surface into what the sensor saw as nothing)."""
+    p = np.pad(seen, 1)
+    h, w = seen.shape
+
+    def at(dv: int, du: int) -> npt.NDArray[np.bool_]:
+        return p[1 + dv:1 + dv + h, 1 + du:1 + du + w]
+
+    return ((at(0, -1) & at(0, 1)) | (at(-1, 0) & at(1, 0)) | (at(-1, -1) & at(1, 1))
+            | (at(-1, 1) & at(1, -1)))
+
+
+def fill_dropouts(depth: npt.NDArray[np.floating], stride: int) -> npt.NDArray[np.float32]:
+    """The strided depth image ``depth[::stride, ::stride]`` (float32), where a pixel without
+    a reading takes the mean of the readings in the 3 x 3 blocks of ``stride`` x ``stride``
+    pixels around it (the block it starts and its eight neighbours: a window 3 ``stride``
+    pixels on a side), when at least ``FILL_MIN_READINGS`` exist and they agree
+    (``FILL_AGREE_M``, ``FILL_AGREE_PER_M``). No reading: 0, NaN, inf, negative or beyond
+    ``MAX_RANGE_M``; pixels still without one keep what they held.
+
+    Why: ToF sensors lose weak returns (dark clothes, shoes, hair, far or grazing surfaces),
+    and a Kinect v2 reads a dark leg at 4 m in one pixel of ten. Striding keeps one pixel
+    in ``stride``^2, so such a part keeps a few scattered points that fail the density test
+    (Eq. 3) and the leg vanishes, foot and all. The window's readings are all the pixels of
+    nine blocks, not only the strided ones (four times as many with stride 2: 36 pixels, of
+    which a one-in-ten part still shows three or four). Agreement keeps a hole at a depth
+    edge (a hand before the chest, a leg before the wall) empty: readings of two surfaces
+    disagree; a surface seen obliquely agrees within the tolerance. The window statistics
+    are 3 x 3 box filters over block means (``cv2.resize`` with ``INTER_AREA``): whole-image
+    OpenCV calls, no loop. docs/design.md, "Dropouts filled when striding", has the
+    measurements.
+    """
+    d = np.asarray(depth)
+    h, w = -(-d.shape[0] // stride), -(-d.shape[1] // stride)
+    z = np.array(d[::stride, ::stride], dtype=np.float32)
+    # One full-resolution float buffer: its readings, then (in place) their squares.
+    m = cv2.patchNaNs(d.astype(np.float32, copy=True), 0)  # no reading: 0
+    cv2.threshold(m, MAX_RANGE_M, 0, cv2.THRESH_TOZERO_INV, dst=m)  # also inf
+    cv2.threshold(m, 0, 0, cv2.THRESH_TOZERO, dst=m)
+    if m.shape != (h * stride, w * stride):  # whole blocks: pad with no readings
+        m = cv2.copyMakeBorder(m, 0, h * stride - m.shape[0], 0, w * stride - m.shape[1],
+                               cv2.BORDER_CONSTANT, value=0)
+    area = np.float32(stride * stride)
+
+    def window_sum(per_block: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+        return cv2.boxFilter(per_block, -1, (3, 3), normalize=False,
+                             borderType=cv2.BORDER_CONSTANT)
+
+    def block_sum(image: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+        return cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA) * area  # exact mean
+
+    # Readings per block: INTER_AREA's mean of a 0/255 mask, 255 k / stride^2 rounded to an
+    # integer, gives k back exactly for any stride up to 15.
+    mask_mean = cv2.resize(cv2.compare(m, 0, cv2.CMP_GT), (w, h), interpolation=cv2.INTER_AREA)
+    per_block = np.rint(mask_mean.astype(np.float32) * (area / np.float32(255)))
+    count = window_sum(per_block)
+    total = window_sum(block_sum(m))
+    squares = window_sum(block_sum(cv2.multiply(m, m, dst=m)))
+    with np.errstate(invalid='ignore'):
+        # Inside a surface, or where its readings are scattered (no block of the window
+        # more than half read: a ToF sensor's weak returns, not the edge of a solid part).
+        scattered = cv2.dilate(per_block, np.ones((3, 3), np.uint8)) <= area / 2
+        empty = np.flatnonzero((count >= FILL_MIN_READINGS - 0.5) & ~(z > 0)
+                               & (_between_readings(per_block > 0) | scattered))
+    n, s1, s2 = count.ravel()[empty], total.ravel()[empty], squares.ravel()[empty]
+    mean = s1 / n
+    tol = np.float32(0.5) * (np.float32(FILL_AGREE_M) + np.float32(FILL_AGREE_PER_M) * mean)
+    agree = s2 / n - mean * mean <= tol * tol
+    z.ravel()[empty[agree]] = mean[agree]
+    return z
 
 
 def _columns(z: npt.NDArray[np.floating], pixels: Pixels, intrinsics: Intrinsics,
@@ -200,7 +284,8 @@ def foreground_cloud(depth: npt.NDArray[np.floating], intrinsics: Intrinsics,
     and, with ``color`` and ``params.color_edge_rgb`` > 0, each point's mean colour.
     """
     z_image, valid = _valid_pixels(depth, intrinsics, params.pixel_stride,
-                                   (params.box_min_z, params.box_max_z), params.depth_median)
+                                   (params.box_min_z, params.box_max_z), params.depth_median,
+                                   params.dropout_fill)
     pixels = Pixels.of(valid)
     x, y, z = _columns(z_image, pixels, intrinsics, params.pixel_stride)
     keep = _in_box(x, y, z, params)

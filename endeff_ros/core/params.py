@@ -45,6 +45,11 @@ class EndeffParams:
     box_max_z: float = _p(5.25, 'Foreground box, maximum z (depth).', unit='m', lo=0.0, hi=20.0)
     pixel_stride: int = _p(2, 'Use every n-th pixel in u and v before back-projection.',
                            lo=1, hi=8)
+    dropout_fill: bool = _p(True, 'A strided pixel without a reading takes the mean of the '
+                            'readings in the 3 x 3 blocks of pixel_stride x pixel_stride pixels '
+                            'around it, when at least two exist and they agree (one surface): '
+                            'dark or distant parts that a ToF sensor reads in one pixel of ten '
+                            'keep enough points for the density test (Eq. 3).')
     depth_median: bool = _p(False, '3x3 median filter on the depth image before back-projection '
                             '(removes flying pixels, thins noisy surfaces).')
     voxel_size: float = _p(0.03, 'Voxel grid cell for downsampling the foreground; 0 = off.',
