@@ -111,19 +111,28 @@ def _valid_pixels(depth: npt.NDArray[np.floating], intrinsics: Intrinsics, strid
     return z, valid
 
 
-def _between_readings(seen: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
-    """Per block of ``seen`` (H, W: blocks with a reading): whether two opposite neighbours
-    (left and right, above and below, or a diagonal's two ends) both have readings, i.e. the
-    block lies inside a surface, not beside its outline (there, the readings all lie on one
-    side and the block would extend the surface into what the sensor saw as nothing)."""
-    p = np.pad(seen, 1)
-    h, w = seen.shape
+#: 3 x 3 kernels picking a block's two opposite neighbours: left and right, above and below,
+#: and the two diagonals (an erosion with one is "both have readings").
+_OPPOSITE_PAIRS = [np.array(k, np.uint8) for k in (
+    [[0, 0, 0], [1, 0, 1], [0, 0, 0]], [[0, 1, 0], [0, 0, 0], [0, 1, 0]],
+    [[1, 0, 0], [0, 0, 0], [0, 0, 1]], [[0, 0, 1], [0, 0, 0], [1, 0, 0]])]
 
-    def at(dv: int, du: int) -> npt.NDArray[np.bool_]:
-        return p[1 + dv:1 + dv + h, 1 + du:1 + du + w]
 
-    return ((at(0, -1) & at(0, 1)) | (at(-1, 0) & at(1, 0)) | (at(-1, -1) & at(1, 1))
-            | (at(-1, 1) & at(1, -1)))
+def _inside_or_scattered(per_block: npt.NDArray[np.uint8], area: int) -> npt.NDArray[np.bool_]:
+    """Per block of ``per_block`` (H, W: readings in each block of ``area`` pixels): whether
+    two opposite neighbours (left and right, above and below, or a diagonal's two ends) both
+    have readings, i.e. the block lies inside a surface, not beside its outline (there the
+    readings all lie on one side, and the block would extend the surface into what the
+    sensor saw as nothing); or whether the readings around it are scattered, no block of
+    the 3 x 3 more than half read (a ToF sensor's weak returns, not a solid part's edge)."""
+    seen = cv2.compare(per_block, 0, cv2.CMP_GT)
+    inside = np.zeros_like(seen)
+    for kernel in _OPPOSITE_PAIRS:
+        cv2.bitwise_or(inside, cv2.erode(seen, kernel, borderType=cv2.BORDER_CONSTANT,
+                                         borderValue=0), dst=inside)
+    scattered = cv2.compare(cv2.dilate(per_block, np.ones((3, 3), np.uint8)), area // 2,
+                            cv2.CMP_LE)
+    return cv2.bitwise_or(inside, scattered) > 0
 
 
 def fill_dropouts(depth: npt.NDArray[np.floating], stride: int) -> npt.NDArray[np.float32]:
@@ -149,10 +158,12 @@ def fill_dropouts(depth: npt.NDArray[np.floating], stride: int) -> npt.NDArray[n
     d = np.asarray(depth)
     h, w = -(-d.shape[0] // stride), -(-d.shape[1] // stride)
     z = np.array(d[::stride, ::stride], dtype=np.float32)
-    # One full-resolution float buffer: its readings, then (in place) their squares.
-    m = cv2.patchNaNs(d.astype(np.float32, copy=True), 0)  # no reading: 0
+    # One full-resolution float buffer: its readings (no reading: 0), then (in place) their
+    # squares. The first threshold writes a new image (the negatives zeroed; NaN passes
+    # OpenCV's threshold unchanged, hence the patch).
+    m = cv2.threshold(d.astype(np.float32, copy=False), 0, 0, cv2.THRESH_TOZERO)[1]
+    cv2.patchNaNs(m, 0)
     cv2.threshold(m, MAX_RANGE_M, 0, cv2.THRESH_TOZERO_INV, dst=m)  # also inf
-    cv2.threshold(m, 0, 0, cv2.THRESH_TOZERO, dst=m)
     if m.shape != (h * stride, w * stride):  # whole blocks: pad with no readings
         m = cv2.copyMakeBorder(m, 0, h * stride - m.shape[0], 0, w * stride - m.shape[1],
                                cv2.BORDER_CONSTANT, value=0)
@@ -166,18 +177,17 @@ def fill_dropouts(depth: npt.NDArray[np.floating], stride: int) -> npt.NDArray[n
         return cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA) * area  # exact mean
 
     # Readings per block: INTER_AREA's mean of a 0/255 mask, 255 k / stride^2 rounded to an
-    # integer, gives k back exactly for any stride up to 15.
+    # integer, gives k back exactly for any stride up to 15 (a lookup table).
     mask_mean = cv2.resize(cv2.compare(m, 0, cv2.CMP_GT), (w, h), interpolation=cv2.INTER_AREA)
-    per_block = np.rint(mask_mean.astype(np.float32) * (area / np.float32(255)))
-    count = window_sum(per_block)
+    per_block = cv2.LUT(mask_mean, np.rint(np.arange(256) * (stride * stride / 255)).astype(
+        np.uint8))
+    count = cv2.boxFilter(per_block, cv2.CV_32F, (3, 3), normalize=False,
+                          borderType=cv2.BORDER_CONSTANT)
     total = window_sum(block_sum(m))
     squares = window_sum(block_sum(cv2.multiply(m, m, dst=m)))
     with np.errstate(invalid='ignore'):
-        # Inside a surface, or where its readings are scattered (no block of the window
-        # more than half read: a ToF sensor's weak returns, not the edge of a solid part).
-        scattered = cv2.dilate(per_block, np.ones((3, 3), np.uint8)) <= area / 2
         empty = np.flatnonzero((count >= FILL_MIN_READINGS - 0.5) & ~(z > 0)
-                               & (_between_readings(per_block > 0) | scattered))
+                               & _inside_or_scattered(per_block, stride * stride))
     n, s1, s2 = count.ravel()[empty], total.ravel()[empty], squares.ravel()[empty]
     mean = s1 / n
     tol = np.float32(0.5) * (np.float32(FILL_AGREE_M) + np.float32(FILL_AGREE_PER_M) * mean)
