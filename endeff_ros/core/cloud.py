@@ -169,8 +169,9 @@ def fill_dropouts(depth: npt.NDArray[np.floating], stride: int) -> npt.NDArray[n
                                cv2.BORDER_CONSTANT, value=0)
     area = np.float32(stride * stride)
 
-    def window_sum(per_block: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
-        return cv2.boxFilter(per_block, -1, (3, 3), normalize=False,
+    def window_sum(blocks: npt.NDArray, ddepth: int = -1) -> npt.NDArray[np.float32]:
+        """Per block, the sum over it and its eight neighbours (nothing beyond the image)."""
+        return cv2.boxFilter(blocks, ddepth, (3, 3), normalize=False,
                              borderType=cv2.BORDER_CONSTANT)
 
     def block_sum(image: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
@@ -181,8 +182,7 @@ def fill_dropouts(depth: npt.NDArray[np.floating], stride: int) -> npt.NDArray[n
     mask_mean = cv2.resize(cv2.compare(m, 0, cv2.CMP_GT), (w, h), interpolation=cv2.INTER_AREA)
     per_block = cv2.LUT(mask_mean, np.rint(np.arange(256) * (stride * stride / 255)).astype(
         np.uint8))
-    count = cv2.boxFilter(per_block, cv2.CV_32F, (3, 3), normalize=False,
-                          borderType=cv2.BORDER_CONSTANT)
+    count = window_sum(per_block, cv2.CV_32F)
     total = window_sum(block_sum(m))
     squares = window_sum(block_sum(cv2.multiply(m, m, dst=m)))
     with np.errstate(invalid='ignore'):
