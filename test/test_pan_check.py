@@ -73,3 +73,14 @@ def test_only_ends_in_view_with_a_live_track_at_the_pan_are_compared():
     assert pan_check.ids_across(rows, 2) == (1, 2, 2)  # 0 kept, 1 lost; 2 and 3 apart
     assert pan_check.ids_across(rows, 1) == (2, 4, 0)  # across frame 1: 2, 3 unmatched there
     assert pan_check.ids_across(rows, 0) == (0, 0, 0)  # no eve
+
+
+def test_on_end_compares_only_ends_their_track_was_on_in_the_eve():
+    """An end whose track was still reported in the pan's eve but had left it (a false
+    positive there) is compared by the plain reading and not by the ``on_end`` one."""
+    row = pan_check._Row
+    rows = [row(0, 0, {0: 5, 1: 6}, {5, 6}, {0, 1}),
+            row(1, 1, {0: 5}, {5, 6}, {0, 1}),  # track 6 is reported but off end 1
+            row(2, 0, {0: 5, 1: 9}, {5, 9}, {0, 1})]  # end 1 comes back under a new id
+    assert pan_check.ids_across(rows, 2) == (1, 2, 0)
+    assert pan_check.ids_across(rows, 2, on_end=True) == (1, 1, 1)

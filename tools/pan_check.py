@@ -12,6 +12,11 @@ the pan (``still_ids_*``: how well the tracker keeps ids from one match to the n
 a pan); and the false positives per frame before the pan (after its first 10 frames), at
 most during the pan and the 2 s after it, and from 2 s after the pan's end on.
 
+A stricter reading of the ids, reported beside them (``ids_on_end_*``): only the ends
+matched to their track in the eve itself are compared; an end whose track was still reported
+there but had already left it (a false positive in that frame) had no track of its own on it
+to keep across the pan.
+
     python -m tools.pan_check data/rooms/mcap [--params YAML] [--jobs 2] [--json OUT]
 """
 
@@ -76,12 +81,13 @@ class _Row(NamedTuple):
     in_view: set[int]
 
 
-def ids_across(rows: list[_Row], at: int) -> tuple[int, int, int]:
+def ids_across(rows: list[_Row], at: int, *, on_end: bool = False) -> tuple[int, int, int]:
     """``(kept, compared, gone)`` across the instant ``at`` (ns). An end is compared when it
     is matched before and from ``at`` on, is in view in the eve (the last row before ``at``)
-    and the track last matched to it is reported there; it is kept when its first match from
-    ``at`` on is that track. ``gone`` counts the other ends matched on both sides (they left
-    the image, or their track ended, before ``at``)."""
+    and the track last matched to it is reported there (``on_end``: and matched to it
+    there); it is kept when its first match from ``at`` on is that track. ``gone`` counts
+    the other ends matched on both sides (they left the image, or their track ended or left
+    them, before ``at``)."""
     before = [r for r in rows if r.stamp_ns < at]
     if not before:
         return 0, 0, 0
@@ -94,7 +100,8 @@ def ids_across(rows: list[_Row], at: int) -> tuple[int, int, int]:
             first.setdefault(k, v)
     eve = before[-1]
     both = [k for k in last if k in first]
-    compared = [k for k in both if k in eve.in_view and last[k] in eve.alive]
+    compared = [k for k in both if k in eve.in_view and last[k] in eve.alive
+                and (not on_end or eve.ids.get(k) == last[k])]
     return (sum(first[k] == last[k] for k in compared), len(compared),
             len(both) - len(compared))
 
@@ -122,12 +129,14 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
     during = [r for r in rows if start <= r.stamp_ns < end + CLEAN_AFTER_NS]
     after = [r for r in rows if r.stamp_ns >= end + CLEAN_AFTER_NS]
     kept, compared, gone = ids_across(rows, start)
+    kept_on_end, compared_on_end, _ = ids_across(rows, start, on_end=True)
     # The control: the same comparison across every instant of a still camera (before the
     # pan after its first 10 frames, and 2 s after it): what the tracker keeps without a pan.
     still = [ids_across(before, r.stamp_ns) for r in before[11:]]
     still += [ids_across(after, r.stamp_ns) for r in after[1:]]
     return {'bag': bag.name, 'ids_kept': kept, 'ids_compared': compared,
             'ids_gone_before': gone,
+            'ids_on_end_kept': kept_on_end, 'ids_on_end_compared': compared_on_end,
             'still_ids_kept': sum(c[0] for c in still),
             'still_ids_compared': sum(c[1] for c in still),
             'fp_per_frame_before': float(np.mean([r.fp for r in before[10:]]))
@@ -160,6 +169,8 @@ def main(argv: list[str] | None = None) -> int:
                         'ids_kept': sum(r['ids_kept'] for r in rows),
                         'ids_compared': sum(r['ids_compared'] for r in rows),
                         'ids_gone_before': sum(r['ids_gone_before'] for r in rows),
+                        'ids_on_end_kept': sum(r['ids_on_end_kept'] for r in rows),
+                        'ids_on_end_compared': sum(r['ids_on_end_compared'] for r in rows),
                         'still_ids_kept': sum(r['still_ids_kept'] for r in rows),
                         'still_ids_compared': sum(r['still_ids_compared'] for r in rows),
                         'fp_per_frame_before': mean('fp_per_frame_before', rows),
