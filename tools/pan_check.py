@@ -162,19 +162,14 @@ def main(argv: list[str] | None = None) -> int:
         vals = [r[key] for r in rows if r[key] is not None]
         return round(float(np.mean(vals)), 3) if vals else None
 
+    counts = ('ids_kept', 'ids_compared', 'ids_gone_before', 'ids_on_end_kept',
+              'ids_on_end_compared', 'still_ids_kept', 'still_ids_compared')
     report: dict[str, Any] = {'bags': per_bag}
     for room in ('empty', 'furnished'):
         rows = [r for r in per_bag if f'-{room}-' in r['bag']]
-        report[room] = {'bags': len(rows),
-                        'ids_kept': sum(r['ids_kept'] for r in rows),
-                        'ids_compared': sum(r['ids_compared'] for r in rows),
-                        'ids_gone_before': sum(r['ids_gone_before'] for r in rows),
-                        'ids_on_end_kept': sum(r['ids_on_end_kept'] for r in rows),
-                        'ids_on_end_compared': sum(r['ids_on_end_compared'] for r in rows),
-                        'still_ids_kept': sum(r['still_ids_kept'] for r in rows),
-                        'still_ids_compared': sum(r['still_ids_compared'] for r in rows),
-                        'fp_per_frame_before': mean('fp_per_frame_before', rows),
-                        'fp_per_frame_after_2s': mean('fp_per_frame_after_2s', rows)}
+        report[room] = {'bags': len(rows), **{k: sum(r[k] for r in rows) for k in counts},
+                        **{k: mean(k, rows) for k in ('fp_per_frame_before',
+                                                      'fp_per_frame_after_2s')}}
     print_json(report, args.json)
     return 0
 
