@@ -214,8 +214,10 @@ class EndeffParams:
     max_rectify_distance: float = _p(0.15, 'A prediction farther than this from every '
                                      'current point is dropped.', unit='m', lo=0.0, hi=5.0)
     revive_distance: float = _p(0.3, 'A new end-effector this close to where a track was '
-                                'lost within the last T frames takes its id back (0: '
-                                'never).', unit='m', lo=0.0, hi=5.0)
+                                'lost within the last T frames takes its id back, and one '
+                                'on the limb of a track that has just gone on its '
+                                'prediction continues that track (0: never).', unit='m',
+                                lo=0.0, hi=5.0)
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):

@@ -98,6 +98,11 @@ class TrackerResult:
 #: it; at 1 a fist resting on the chest between punches, about as long as it was out, gave
 #: way to the elbow (docs/design.md, "Case B memory lasts no longer than twice its evidence").
 CASE_B_HOLD_FACTOR = 2
+#: A track that went on its prediction no more than this many frames ago takes back a new
+#: candidate on its limb within ``revive_distance`` (:meth:`Tracker._resume_predicted`). One
+#: held longer is an end-effector its memory kept against the candidates (a fist resting on
+#: the chest, Fig. 7b), and a candidate beside it is then another end (the other fist).
+RESUME_MAX_HELD = 2
 
 
 class _Lost(NamedTuple):
@@ -447,6 +452,7 @@ class Tracker:
                 self._take_prediction(track, pr, pred_geo, missed=True)
                 survivors.append(track)
         new = [j for j in range(len(cands)) if j not in used_cands and not loop_side[j]]
+        new = self._resume_predicted(survivors, new, cands, cand_entity)
         ids = self._revived_ids([cands[j].end_centre for j in new])
         for j, track_id in zip(new, ids):
             cand = cands[j]
@@ -467,6 +473,38 @@ class Tracker:
         limit = self.params.case_b_path_distance
         return (limit <= 0 or len(track.path) == 0
                 or distance_to_path(cand.end_centre, track.path) <= limit)
+
+    def _resume_predicted(self, survivors: list[_TrackState], new: list[int],
+                          cands: list[Candidate], cand_entity: list[int]) -> list[int]:
+        """The candidates ``new`` (indices into ``cands``) that no track matched, less those a
+        track on its prediction takes back. A track that lost its detection in this frame or
+        the one before (``RESUME_MAX_HELD``) takes, as a detection in which its end-effector is
+        unrelated to the memory (Eq. 8's second case), the nearest such candidate of its entity
+        within ``revive_distance`` that lies on its limb (:meth:`_on_limb`), nearest pairs
+        first. Why: the Hungarian matching pairs a prediction with its own end-effector, but
+        when their geodesic similarity falls below the case-A and case-B thresholds (the root
+        moved, a loop opened or closed) the track goes on predicted (case C) and the candidate
+        starts a second track beside it: the same end-effector twice, one copy false, under a
+        new id. This is :meth:`_revived_ids` for tracks still alive. docs/design.md, "A track
+        on its prediction takes back its end-effector"."""
+        predicted = [t for t in survivors if not t.detected and t.held <= RESUME_MAX_HELD]
+        if not predicted or not new:
+            return new
+        d = np.linalg.norm(np.array([cands[j].end_centre for j in new])[:, None]
+                           - np.array([t.position for t in predicted])[None], axis=2)
+        d[np.array([cand_entity[j] for j in new])[:, None]
+          != np.array([t.entity for t in predicted])[None]] = np.inf
+        rest, taken = set(range(len(new))), set()
+        for flat in np.argsort(d, axis=None):  # a few new candidates and predictions at most
+            i, k = (int(x) for x in np.unravel_index(flat, d.shape))
+            if d[i, k] >= self.params.revive_distance:
+                break
+            track, j = predicted[k], new[i]
+            if i in rest and k not in taken and self._on_limb(track, cands[j]):
+                self._take_detection(track, cands[j], cand_entity[j], related=False)
+                rest.discard(i)
+                taken.add(k)
+        return [new[i] for i in sorted(rest)]
 
     def _revived_ids(self, positions: list[npt.NDArray[np.float64]]) -> list[int]:
         """Ids for new tracks at ``positions``. A track dropped within the last
