@@ -43,7 +43,6 @@ def check_bag(bag: Path, params: Any = None) -> dict[str, Any]:
     estimators do not run)."""
     del params
     frames = []  # per frame with ground truth: labels, then the points each ceiling finds
-    seen_n = hidden_n = 0
     last: dict[int, int] = {}
     with BagReader(bag) as reader:
         attributes, _ = parse_attributes(custom_data(reader.reader), str(bag))
@@ -56,7 +55,8 @@ def check_bag(bag: Path, params: Any = None) -> dict[str, Any]:
             frame_ids = ids.get(frame.stamp_ns)
             keys = (frame_ids.tolist() if frame_ids is not None and len(frame_ids) == len(gt)
                     else list(range(len(gt))))
-            gaps = np.array([0 if s else index - last.get(k, index) if k in last else -1
+            # Frames since the end-effector was last seen: 0 if seen now, -1 if never.
+            gaps = np.array([0 if s else index - last[k] if k in last else -1
                              for k, s in zip(keys, seen)])
             for k, s in zip(keys, seen):
                 if s:
@@ -64,13 +64,12 @@ def check_bag(bag: Path, params: Any = None) -> dict[str, Any]:
             found = [int(np.count_nonzero(seen | ((gaps > 0) & (gaps <= h)))) for h in HOLDS]
             found.append(int(np.count_nonzero(seen | (gaps > 0))))
             frames.append([len(gt), *found])
-            seen_n += int(np.count_nonzero(seen))
-            hidden_n += int(len(gt) - np.count_nonzero(seen))
-    counts = np.array(frames, dtype=float).reshape(-1, len(HOLD_NAMES) + 1)
+    counts = np.array(frames, dtype=np.int64).reshape(-1, len(HOLD_NAMES) + 1)
     ceilings = ({name: float(np.mean(counts[:, i + 1] / counts[:, 0]))
                  for i, name in enumerate(HOLD_NAMES)} if len(counts) else None)
-    return {'bag': bag.name, 'attributes': attributes, 'points': seen_n + hidden_n,
-            'seen': seen_n, 'ceiling': ceilings}
+    # A hold of 0 frames finds exactly the seen points.
+    return {'bag': bag.name, 'attributes': attributes, 'points': int(counts[:, 0].sum()),
+            'seen': int(counts[:, 1].sum()), 'ceiling': ceilings}
 
 
 def _mean(rows: list[dict[str, Any]]) -> dict[str, Any]:

@@ -65,6 +65,8 @@ from .single_frame import FrameEstimate, estimate_frame
 from .types import Candidate, Intrinsics, RGBDFrame, Track
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     import numpy.typing as npt
 
     #: The tracker's region-of-interest flow: field, top-left pixel (u0, v0), scale (sx, sy).
@@ -103,6 +105,26 @@ CASE_B_HOLD_FACTOR = 2
 #: held longer is an end-effector its memory kept against the candidates (a fist resting on
 #: the chest, Fig. 7b), and a candidate beside it is then another end (the other fist).
 RESUME_MAX_HELD = 2
+
+
+def _nearest_pairs(d: npt.NDArray[np.float64], radius: float,
+                   accept: Callable[[int, int], bool] | None = None) -> list[tuple[int, int]]:
+    """One-to-one (row, column) pairs of the distance matrix ``d`` closer than ``radius``,
+    nearest pairs first; ``accept(row, column)`` may refuse a pair (both stay free for
+    others). A few new end-effectors and tracks at most: a greedy pass over the sorted
+    matrix, no assignment solver."""
+    rows: set[int] = set()
+    cols: set[int] = set()
+    pairs = []
+    for flat in np.argsort(d, axis=None):
+        i, k = (int(x) for x in np.unravel_index(flat, d.shape))
+        if d[i, k] >= radius:
+            break
+        if i not in rows and k not in cols and (accept is None or accept(i, k)):
+            pairs.append((i, k))
+            rows.add(i)
+            cols.add(k)
+    return pairs
 
 
 class _Lost(NamedTuple):
@@ -494,17 +516,13 @@ class Tracker:
                            - np.array([t.position for t in predicted])[None], axis=2)
         d[np.array([cand_entity[j] for j in new])[:, None]
           != np.array([t.entity for t in predicted])[None]] = np.inf
-        rest, taken = set(range(len(new))), set()
-        for flat in np.argsort(d, axis=None):  # a few new candidates and predictions at most
-            i, k = (int(x) for x in np.unravel_index(flat, d.shape))
-            if d[i, k] >= self.params.revive_distance:
-                break
-            track, j = predicted[k], new[i]
-            if i in rest and k not in taken and self._on_limb(track, cands[j]):
-                self._take_detection(track, cands[j], cand_entity[j], related=False)
-                rest.discard(i)
-                taken.add(k)
-        return [new[i] for i in sorted(rest)]
+        pairs = _nearest_pairs(d, self.params.revive_distance,
+                               lambda i, k: self._on_limb(predicted[k], cands[new[i]]))
+        for i, k in pairs:
+            self._take_detection(predicted[k], cands[new[i]], cand_entity[new[i]],
+                                 related=False)
+        taken = {i for i, _ in pairs}
+        return [j for i, j in enumerate(new) if i not in taken]
 
     def _revived_ids(self, positions: list[npt.NDArray[np.float64]]) -> list[int]:
         """Ids for new tracks at ``positions``. A track dropped within the last
@@ -522,14 +540,10 @@ class Tracker:
         if self._lost and positions:
             d = np.linalg.norm(np.array(positions)[:, None]
                                - np.array([lost.position for lost in self._lost])[None], axis=2)
-            taken: set[int] = set()
-            for flat in np.argsort(d, axis=None):  # a few new tracks and lost ones at most
-                i, k = np.unravel_index(flat, d.shape)
-                if d[i, k] >= p.revive_distance:
-                    break
-                if ids[i] is None and k not in taken:
-                    ids[i] = self._lost[k].id
-                    taken.add(int(k))
+            pairs = _nearest_pairs(d, p.revive_distance)
+            for i, k in pairs:
+                ids[i] = self._lost[k].id
+            taken = {k for _, k in pairs}
             self._lost = [lost for k, lost in enumerate(self._lost) if k not in taken]
         return [self._new_id() if i is None else i for i in ids]
 
