@@ -12,6 +12,11 @@ Views, sensors, rooms and people cycle with the bag's index (periods 5, 6, 7 and
 each pass over the clips), so the combinations spread over clips and splits; the random parts
 (height, build, clothing, distance, camera height, tilt, roll) come from a generator seeded by
 the suite seed and the bag's index, so a spec never depends on which other bags are selected.
+
+In the full suite a bag's index is its clip's position in the whole catalogue (sorted by name;
+``catalogue_index``), not among the clips that happen to be loaded: a machine with the committed
+clips only draws and names their bags exactly as one with the fetched cache does. Only the
+partners of a multi-person bag depend on what is loaded (they are drawn from it).
 """
 
 from __future__ import annotations
@@ -190,11 +195,29 @@ def _is_walk(clip: MotionClip, pos: npt.NDArray[np.float64], n: int) -> bool:
     return float(np.linalg.norm((seg[-1] - seg[0])[[0, 2]])) >= 0.4
 
 
+def catalogue_index(clips: Sequence[MotionClip],
+                    catalogue: Sequence[str] | None = None) -> dict[str, int]:
+    """Each clip's index in the full suite: its position among the ``catalogue``'s names
+    (default: every clip of ``mocap.catalogue``, fetched or not), sorted; clips outside the
+    catalogue (procedural ones) follow, sorted by name. It does not depend on which catalogue
+    clips are loaded, so neither do the bags' draws and names."""
+    if catalogue is None:
+        from .mocap.catalogue import CLIPS
+
+        catalogue = [e.name for e in CLIPS]
+    names = sorted(set(catalogue))
+    known = set(names)
+    names += sorted({c.name for c in clips} - known)
+    return {name: k for k, name in enumerate(names)}
+
+
 def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int = 0,
-                max_s: float = FULL_MAX_S) -> list[BagSpec]:
+                max_s: float = FULL_MAX_S,
+                catalogue: Sequence[str] | None = None) -> list[BagSpec]:
     """The suite's bag specs for ``clips``: quick = ``QUICK_BAGS`` bags (clips repeat if
     fewer) of ``QUICK_FRAMES`` frames; full = one bag per clip, each up to ``max_s`` s (its
-    most active segment), plus one multi-person bag per 8 clips."""
+    most active segment), plus one multi-person bag for each clip in the first eighth of the
+    catalogue (``catalogue_index``, which numbers the full suite's bags)."""
     if not clips:
         msg = 'the mocap suite needs at least one clip'
         raise ValueError(msg)
@@ -203,34 +226,43 @@ def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
         raise ValueError(msg)
     order = sorted(clips, key=lambda c: c.name)
     pos = {c.name: resampled(c) for c in order}
-    if quick:
-        count = max(QUICK_BAGS, len(order))
-    else:
-        count = len(order) + len(order) // 8
     specs = []
-    for i in range(count):
+    if quick:
+        for i in range(max(QUICK_BAGS, len(order))):
+            rng = np.random.default_rng([seed, 7, i])
+            specs.append(draw_spec(i, order[i % len(order)], order, pos, QUICK_FRAMES,
+                                   _PEOPLE[i % len(_PEOPLE)], rng, quick))
+        return specs
+    index = catalogue_index(order, catalogue)
+    total = len(index)
+    # One bag per clip (the first pass over the catalogue), then the multi-person bags of the
+    # first eighth of the catalogue (the second pass: the cycles shift by one lap).
+    bags = [(index[c.name], c, 1, 0) for c in order]
+    bags += [(total + index[c.name], c, 2 + (total + index[c.name]) % 2, 1) for c in order
+             if index[c.name] < total // 8]
+    for i, clip, people, lap in sorted(bags, key=lambda b: b[0]):
         rng = np.random.default_rng([seed, 7, i])
-        clip = order[i % len(order)]
-        n = QUICK_FRAMES if quick else int(min(len(pos[clip.name]), max(2, round(max_s * FPS))))
-        people = _PEOPLE[i % len(_PEOPLE)] if (quick or i >= len(order)) else 1
-        if not quick and i >= len(order):
-            people = 2 + i % 2
-        specs.append(draw_spec(i, clip, order, pos, n, people, rng, quick))
+        n = int(min(len(pos[clip.name]), max(2, round(max_s * FPS))))
+        specs.append(draw_spec(i, clip, order, pos, n, people, rng, quick, lap=lap))
     return specs
 
 
 def draw_spec(i: int, clip: MotionClip, order: list[MotionClip], pos: dict, n: int,
-              people: int, rng: np.random.Generator, quick: bool) -> BagSpec:
+              people: int, rng: np.random.Generator, quick: bool,
+              lap: int | None = None) -> BagSpec:
     """The spec of bag ``i`` of ``clip`` (``order``: every clip, sorted by name; ``pos``:
     their joints at 30 fps; ``n`` frames): sensor, view and room from the cycles, the rest
-    drawn from ``rng``."""
-    lap = i // len(order)  # shifts the cycles on each pass over the clips
+    drawn from ``rng``. ``lap`` shifts the cycles (default: ``i // len(order)``, one shift
+    per pass over the clips). Everything but a multi-person bag's partners depends on ``i``,
+    ``lap``, ``clip`` and ``rng`` only: the other clips of ``order`` supply the partners."""
+    if lap is None:
+        lap = i // len(order)
     sensor = SENSORS[_SENSORS[(i + lap) % len(_SENSORS)]]
     kind = _VIEWS[(i + 2 * lap) % len(_VIEWS)]
     room = _ROOMS[(i + 3 * lap) % len(_ROOMS)]
     walkers = [c for c in order if c.split == clip.split and c.name != clip.name
-               and _is_walk(c, pos[c.name], n)]
-    if people > 1 and walkers:
+               and _is_walk(c, pos[c.name], n)] if people > 1 else []
+    if people > 1:
         kind = 'across'
     if clip.family == 'sit' and _sits(pos[clip.name], n):
         interaction, room = 'sit', 'furnished'
