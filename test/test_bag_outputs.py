@@ -159,9 +159,18 @@ class Slow(FakeTracker):
         return super().update(frame)
 
 t.Tracker = Slow
-from endeff_ros.cli import main
-sys.exit(main(sys.argv[1:]))
+if __name__ == '__main__':
+    from endeff_ros.cli import main
+    sys.exit(main(sys.argv[1:]))
 """
+
+
+def _slow_endeff(tmp_path: Path) -> list[str]:
+    """The command line of ``endeff`` with a slow fake tracker. A script file, not ``-c``: the
+    spawned workers run its top level again (as ``__mp_main__``), so they get the patch too."""
+    script = tmp_path / 'slow_endeff.py'
+    script.write_text(_SLOW_RUN.format(test_dir=str(TEST_DIR)), encoding='utf-8')
+    return [sys.executable, str(script)]
 
 
 @pytest.mark.parametrize(('sig', 'status', 'jobs'), [(signal.SIGINT, 130, 1),
@@ -174,10 +183,9 @@ def test_interrupt_leaves_nothing(tmp_path: Path, sig: int, status: int, jobs: i
         ins.append(tmp_path / 'in' / f'bag{k}')
         write_bag(ins[-1], BagSpec(frames=120, width=32, height=24, fx=10.0, blob_px=1))
     out = tmp_path / 'out'
-    code = _SLOW_RUN.format(test_dir=str(TEST_DIR))
     # A shell starts background jobs with SIGINT ignored, and Python then installs no handler
     # for it: the child gets the default disposition back, as a terminal's process has.
-    proc = subprocess.Popen([sys.executable, '-c', code, 'process', *map(str, ins), '-o',
+    proc = subprocess.Popen([*_slow_endeff(tmp_path), 'process', *map(str, ins), '-o',
                              str(out), '--jobs', str(jobs)], stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 60
@@ -201,7 +209,7 @@ def test_sigterm_with_an_idle_worker_keeps_the_finished_bag(tmp_path: Path) -> N
     write_bag(short, BagSpec(frames=3, width=32, height=24, fx=10.0, blob_px=1))
     write_bag(long_, BagSpec(frames=200, width=32, height=24, fx=10.0, blob_px=1))
     out = tmp_path / 'out'
-    proc = subprocess.Popen([sys.executable, '-c', _SLOW_RUN.format(test_dir=str(TEST_DIR)),
+    proc = subprocess.Popen([*_slow_endeff(tmp_path),
                              'process', str(short), str(long_), '-o', str(out), '--jobs', '2'],
                             stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
@@ -232,6 +240,15 @@ def _children(pid: int) -> list[int]:
     return kids
 
 
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` still runs: it exists and is not a zombie (an ended child that
+    the parent or, once it is gone, init has not reaped yet)."""
+    try:
+        return Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0] != 'Z'
+    except OSError:
+        return False
+
+
 def _started_with_workers(tmp_path: Path, command: str, args: list[str],
                           **popen: Any) -> tuple[subprocess.Popen[str], list[int]]:
     """``endeff COMMAND`` on three slow bags with ``--jobs 2`` (and ``args``), once its two
@@ -239,7 +256,7 @@ def _started_with_workers(tmp_path: Path, command: str, args: list[str],
     ins = [tmp_path / 'in' / f'bag{k}' for k in range(3)]
     for bag in ins:
         write_bag(bag, BagSpec(frames=200, width=32, height=24, fx=10.0, blob_px=1))
-    proc = subprocess.Popen([sys.executable, '-c', _SLOW_RUN.format(test_dir=str(TEST_DIR)),
+    proc = subprocess.Popen([*_slow_endeff(tmp_path),
                              command, *map(str, ins), *args, '--jobs', '2'],
                             stderr=subprocess.PIPE, text=True, **popen)
     deadline = time.monotonic() + 60
@@ -277,7 +294,7 @@ def test_sigterm_to_eval_stops_its_workers(tmp_path: Path) -> None:
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, err
     assert 'interrupted' in err and 'Traceback' not in err, err
-    assert not [pid for pid in workers if Path(f'/proc/{pid}').exists()]
+    assert not [pid for pid in workers if _running(pid)]
 
 
 def test_sigkill_leftover_is_removed_by_the_next_run(tmp_path: Path,
@@ -287,8 +304,7 @@ def test_sigkill_leftover_is_removed_by_the_next_run(tmp_path: Path,
     src = tmp_path / 'in'
     write_bag(src, BagSpec(frames=120, width=32, height=24, fx=10.0, blob_px=1))
     out = tmp_path / 'out'
-    code = _SLOW_RUN.format(test_dir=str(TEST_DIR))
-    proc = subprocess.Popen([sys.executable, '-c', code, 'process', str(src), '-o', str(out)],
+    proc = subprocess.Popen([*_slow_endeff(tmp_path), 'process', str(src), '-o', str(out)],
                             stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 60
     while not _leftovers(tmp_path) and time.monotonic() < deadline:

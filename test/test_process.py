@@ -170,7 +170,7 @@ def _fake_tracker_everywhere(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_cli_several_bags_one_bad(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                   capsys: pytest.CaptureFixture[str]) -> None:
-    _fake_tracker_everywhere(monkeypatch)  # inherited by the forked workers
+    _fake_tracker_everywhere(monkeypatch)  # the serial runs; spawned workers run the real one
     ins = []
     for name, spec in [('good_a', BagSpec(frames=4)),
                        ('bad_enc', BagSpec(frames=4, depth_encoding='8UC1')),

@@ -37,7 +37,6 @@ import argparse
 import functools
 import heapq
 import os
-import signal
 import sqlite3
 import sys
 import time
@@ -351,36 +350,11 @@ def _copy_merged(bag: BagReader, writer: Any, outputs: list[tuple[int, int, Any,
 # Several bags, several processes
 # --------------------------------------------------------------------------------------------
 
-#: In a worker: set by SIGTERM; a job that starts afterwards returns at once.
-_STOPPING = False
-#: In a worker: True while :func:`_job` runs process_bag (whose cleanup the interrupt unwinds).
-_IN_JOB = False
-
-
-def _init_worker(counter: Any) -> None:
-    prog.init_worker(counter)
-    signal.signal(signal.SIGTERM, _worker_sigterm)
-
-
-def _worker_sigterm(signum: int, _frame: Any) -> None:
-    """SIGTERM in a worker: unwind the bag being processed like Ctrl-C (process_bag's cleanup
-    removes its partial output) and take no further bag. A worker waiting for work is not
-    interrupted: an exception there would escape the pool's own loop and kill the worker with
-    a traceback, and the parent could no longer shut the pool down cleanly."""
-    global _STOPPING
-    _STOPPING = True
-    if _IN_JOB:
-        raise Terminated(signum)
-
-
 def _job(job: tuple[Any, ...]) -> ProcessResult:
-    """Process one bag; never raises but for an interrupt (an error is in the result, naming
-    the bag)."""
-    global _IN_JOB
+    """Process one bag in a worker; never raises but for an interrupt (an error is in the
+    result, naming the bag). SIGTERM from the parent unwinds process_bag, whose cleanup removes
+    the partial output (:mod:`endeff_ros.workers`)."""
     in_path, out_path, kwargs = job
-    if _STOPPING:
-        return ProcessResult(str(in_path), str(out_path), error=f'{in_path}: interrupted')
-    _IN_JOB = True
     try:
         return process_bag(in_path, out_path, progress=prog.report, **kwargs)
     except BagError as err:
@@ -391,8 +365,6 @@ def _job(job: tuple[Any, ...]) -> ProcessResult:
         tb = traceback.format_exc(limit=6)
         return ProcessResult(str(in_path), str(out_path),
                              error=f'{in_path}: {type(err).__name__}: {err}\n{tb}')
-    finally:
-        _IN_JOB = False
 
 
 def process_bags(inputs: Sequence[str | Path], output: str | Path, *, jobs: int | None = None,
@@ -437,8 +409,8 @@ def _serial_job(job: tuple[Any, ...], progress: Callable[[int], None]) -> Proces
 def _parallel(job_list: list[tuple[Any, ...]], workers: int, bar: prog.ProgressBar,
               outs: list[Path]) -> list[ProcessResult]:
     try:
-        # On an interrupt the pool SIGTERMs the workers: _worker_sigterm unwinds their bags.
-        return prog.map_in_workers(_job, job_list, workers, bar, initializer=_init_worker)
+        # On an interrupt the workers get SIGTERM, which unwinds their bags.
+        return prog.map_in_workers(_job, job_list, workers, bar)
     except BaseException:
         for o in outs:  # what a worker killed too early left
             sweep_stale_partials(o)

@@ -2,8 +2,8 @@
 
 ``tqdm`` is optional: without it, or when stderr is not a terminal (CI logs, pipes), every
 call here is a no-op, so commands print the same lines either way. Work done in worker
-processes is counted in one shared integer (:func:`shared_counter`, :func:`init_worker`,
-:func:`report`) that the parent polls into the bar.
+processes is sent to the parent over each worker's pipe (:func:`report`,
+:func:`endeff_ros.workers.report_progress`) and added to the bar there.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
-from endeff_ros.workers import ignore_sigint, process_pool
+from endeff_ros.workers import report_progress, run_jobs
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
@@ -89,56 +89,21 @@ def count_frames(paths: Iterable[Path], options: ReaderOptions | None = None) ->
     return total
 
 
-# Shared frame counter for worker processes -----------------------------------------------------
-
-_COUNTER: Any = None
-
-
-def shared_counter(ctx: Any = None) -> Any:
-    """A process-shared integer for :func:`init_worker` (``ctx``: a multiprocessing context)."""
-    import multiprocessing
-
-    return (ctx or multiprocessing.get_context()).Value('q', 0)
-
-
-def init_worker(counter: Any) -> None:
-    """Pool initializer: :func:`report` in this worker adds to ``counter``. Ctrl-C (SIGINT to
-    the terminal's whole process group) is left to the parent, which stops the workers
-    (:func:`map_in_workers`): a worker interrupted while it waits for work would die with a
-    traceback."""
-    global _COUNTER
-    _COUNTER = counter
-    ignore_sigint()
+# Frames counted in worker processes ------------------------------------------------------------
 
 
 def report(n: int = 1) -> None:
-    """Add ``n`` frames to the shared counter (no-op outside a worker set up by init_worker)."""
-    if _COUNTER is not None:
-        with _COUNTER.get_lock():
-            _COUNTER.value += n
+    """In a worker of :func:`map_in_workers`: ``n`` more frames for the parent's bar (a no-op
+    elsewhere)."""
+    report_progress(n)
 
 
 def map_in_workers(fn: Callable[[Any], Any], jobs: Sequence[Any], workers: int,
-                   bar: ProgressBar, *,
-                   initializer: Callable[[Any], None] = init_worker) -> list[Any]:
-    """``[fn(job) for job in jobs]`` on ``workers`` processes, in job order, while ``bar``
-    follows the frames the workers :func:`report`. ``initializer(counter)`` sets a worker up
-    (it must call :func:`init_worker`). On any exception (an interrupt) the pool's workers
-    get SIGTERM (by default they end at once; a worker that installed its own handler
-    unwinds its job), the pool is shut down (jobs not started are cancelled, the workers are
-    waited for) and the exception goes on.
+                   bar: ProgressBar) -> list[Any]:
+    """``[fn(job) for job in jobs]`` on ``workers`` spawned processes, in job order, while
+    ``bar`` follows the frames the workers :func:`report`. ``fn`` is expected to return its
+    errors; one it raises is raised here. An interrupt stops every worker within seconds
+    (:mod:`endeff_ros.workers`: a worker's job unwinds on SIGTERM) and goes on.
     """
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, wait
-
-    ctx = multiprocessing.get_context()
-    counter = shared_counter(ctx)
-    with process_pool(workers, mp_context=ctx, initializer=initializer,
-                      initargs=(counter,)) as pool:
-        futures = [pool.submit(fn, j) for j in jobs]
-        pending = set(futures)
-        while pending:
-            _, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-            bar.update_to(counter.value)
-        bar.update_to(counter.value)
-    return [f.result() for f in futures]
+    outcomes = run_jobs(fn, [(j,) for j in jobs], workers, on_progress=bar.update_to)
+    return [o.result() for o in outcomes]

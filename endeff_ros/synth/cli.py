@@ -18,10 +18,9 @@ import json
 import os
 import sys
 import time
-from multiprocessing import get_context
 from pathlib import Path
 
-from endeff_ros.workers import process_pool
+from endeff_ros.workers import run_jobs
 
 from .sequences import GROUPS, SEQUENCES, SPECS
 
@@ -87,12 +86,11 @@ def generate(out: Path, names: list[str], storages: list[str], *, quick: bool = 
     jobs = max(1, min(jobs, len(names)))
     if jobs == 1:
         return {n: generate_one(n, out, storages, quick, seed) for n in names}
-    # Longest sequences first so the workers finish together; spawned workers (no fork of a
-    # possibly multi-threaded caller).
+    # Longest sequences first so the workers finish together.
     order = sorted(names, key=lambda n: -SPECS[n].frames)
-    with process_pool(jobs, mp_context=get_context('spawn')) as pool:
-        futs = {n: pool.submit(generate_one, n, out, storages, quick, seed) for n in order}
-        return {n: futs[n].result() for n in names}
+    outcomes = run_jobs(generate_one, [(n, out, storages, quick, seed) for n in order], jobs)
+    done = {n: o.result() for n, o in zip(order, outcomes, strict=True)}
+    return {n: done[n] for n in names}
 
 
 LOOP_S = 8.0  # full suite: cyclic clips (short walks, runs) repeated to this length
@@ -175,16 +173,15 @@ def run_mocap(args: argparse.Namespace, storages: list[str]) -> int:
                 failed[s.name] = f'{type(exc).__name__}: {exc}'
     else:
         order = sorted(specs, key=lambda s: -s.frames * len(s.people))
-        with process_pool(jobs, mp_context=get_context('spawn')) as pool:
-            futs = {}
-            for s in order:
-                need = {p.clip: byname[p.clip] for p in s.people}
-                futs[s.name] = pool.submit(_mocap_one, s, need, args.out, storages)
-            for s in specs:
-                try:
-                    results[s.name] = futs[s.name].result()
-                except (OSError, ValueError, KeyError) as exc:
-                    failed[s.name] = f'{type(exc).__name__}: {exc}'
+        outcomes = run_jobs(_mocap_one, [
+            (s, {p.clip: byname[p.clip] for p in s.people}, args.out, storages)
+            for s in order], jobs)
+        by_name = {s.name: o for s, o in zip(order, outcomes, strict=True)}
+        for s in specs:
+            try:
+                results[s.name] = by_name[s.name].result()
+            except (OSError, ValueError, KeyError) as exc:
+                failed[s.name] = f'{type(exc).__name__}: {exc}'
     dt = time.monotonic() - t0
     total = sum(r['frames'] for r in results.values())
     for name, r in results.items():
