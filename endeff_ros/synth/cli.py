@@ -49,6 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--list', action='store_true',
                         help='mocap, rooms: print the bag names and attributes, render '
                              'nothing')
+    parser.add_argument('--no-margins', action='store_true',
+                        help="mocap, rooms: render depth without the sensors' dead margins "
+                             '(twins of the default bags, same names, for comparison)')
     parser.add_argument('--jobs', type=int, default=0,
                         help='worker processes (default: number of CPUs)')
 
@@ -136,13 +139,14 @@ def _suite_specs(args: argparse.Namespace, clips: list) -> list:
     from .suite import suite_specs
 
     max_s = getattr(args, 'max_seconds', None)
+    margins = not getattr(args, 'no_margins', False)
     if args.suite == 'rooms':
         if max_s is not None:
             msg = '--max-seconds applies to the mocap suite only (rooms bags have fixed lengths)'
             raise ValueError(msg)
-        return rooms_specs(clips, quick=args.quick, seed=args.seed)
+        return rooms_specs(clips, quick=args.quick, seed=args.seed, margins=margins)
     extra = {} if max_s is None else {'max_s': max_s}
-    return suite_specs(clips, quick=args.quick, seed=args.seed, **extra)
+    return suite_specs(clips, quick=args.quick, seed=args.seed, margins=margins, **extra)
 
 
 def run_mocap(args: argparse.Namespace, storages: list[str]) -> int:

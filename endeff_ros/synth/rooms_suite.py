@@ -41,7 +41,7 @@ import numpy.typing as npt
 
 from .mocap.clip import JOINT_INDEX, MotionClip
 from .pan import Pan
-from .suite import FPS, BagSpec, draw_spec, resampled, safe_name, window_start
+from .suite import FPS, BagSpec, draw_spec, resampled, safe_name, set_margins, window_start
 
 PAIR_S = 3.0  # static pairs: bag length
 PAN_BAG_S = 5.0  # pan pairs: bag length, with the turn
@@ -100,11 +100,12 @@ def pair_specs(base: BagSpec, index: int, pan: Pan | None = None) -> list[BagSpe
             for name, room in zip(names, ROOMS)]
 
 
-def rooms_specs(clips: Sequence[MotionClip], *, quick: bool = False,
-                seed: int = 0) -> list[BagSpec]:
+def rooms_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int = 0,
+                margins: bool = True) -> list[BagSpec]:
     """The suite's bag specs for ``clips``, pair by pair (empty, then furnished), per split
     (dev, then test) the static pairs and then the pan pairs. Clips of family ``sit`` are left
-    out: without their chair they would sit on air in the empty room."""
+    out: without their chair they would sit on air in the empty room. ``margins``: false
+    renders the bags without the sensors' dead margins (same names)."""
     if not clips:
         msg = 'the rooms suite needs at least one clip'
         raise ValueError(msg)
@@ -146,4 +147,4 @@ def rooms_specs(clips: Sequence[MotionClip], *, quick: bool = False,
             base = dataclasses.replace(base, people=(person,), frames=n_pan, attributes=attrs)
             specs += pair_specs(base, index, pan)
             index += 1
-    return specs
+    return set_margins(specs, margins)

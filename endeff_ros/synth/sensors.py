@@ -17,11 +17,19 @@ run over a few kernel offsets or disparity shifts, never over pixels.
   correlated "speckle" disparity noise, no reading where the second imager cannot see the
   surface (left of a near edge, width f B (1/z_far - 1/z_near) px), foreground fattening of
   block matching at edges, small invalid blobs, and a minimum distance.
+
+Registered depth also has *dead margins*: parts of the colour image that the depth camera does
+not see once its image is mapped onto the colour camera's, where the driver publishes no
+reading (``DeadMargin``, the field ``SensorModel.margin``; ``None`` renders the whole image, as
+the paper suite's sensor does). A body cut by such a margin looks cut at the image border, so
+a benchmark that leaves them out never shows the false ends a real camera gives there. Colour
+is full-frame: only depth is dead.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -35,6 +43,58 @@ KINDS = ('structured_light', 'tof', 'stereo')
 
 
 @dataclass(frozen=True)
+class DeadMargin:
+    """Where registered depth has no reading, as fractions of the image's width and height
+    (so that one model serves every resolution of a camera): bands along the four borders,
+    and ``corner`` (of the width) cut off each corner along a line from that far in on the top
+    or bottom row to the middle of the side (a hexagon, Azure Kinect NFOV). Sizes at the
+    models' resolutions are in docs/mocap-suite.md."""
+
+    top: float = 0.0
+    bottom: float = 0.0
+    left: float = 0.0
+    right: float = 0.0
+    corner: float = 0.0
+
+    def __post_init__(self) -> None:
+        sides = (self.top, self.bottom, self.left, self.right, self.corner)
+        if not all(0.0 <= f < 0.5 for f in sides):
+            msg = f'dead margins must be fractions in [0, 0.5), got {sides}'
+            raise ValueError(msg)
+
+    def mask(self, width: int, height: int) -> npt.NDArray[np.bool_]:
+        """(height, width) bool, True where depth has no reading."""
+        return _margin_mask(self, width, height).copy()
+
+
+@lru_cache(maxsize=32)
+def _margin_mask(margin: DeadMargin, width: int, height: int) -> npt.NDArray[np.bool_]:
+    u = np.arange(width) + 0.5
+    v = (np.arange(height) + 0.5)[:, None]
+    dead = ((v < margin.top * height) | (v > height - margin.bottom * height)
+            | (u < margin.left * width) | (u > width - margin.right * width))
+    if margin.corner > 0:
+        cut = margin.corner * width * np.abs(v - 0.5 * height) / (0.5 * height)
+        dead = dead | (u < cut) | (width - u < cut)
+    dead = np.broadcast_to(dead, (height, width)).copy()
+    dead.flags.writeable = False
+    return dead
+
+
+# Kinect v1 and Xtion (structured light, registered by the driver): no reading in rows 0-33 and
+# 464-479 and columns 0-40 and 605-639 of a 640x480 image (measured on a real sequence).
+_PRIMESENSE_MARGIN = DeadMargin(top=34 / 480, bottom=16 / 480, left=41 / 640, right=35 / 640)
+# RealSense D4xx aligned to colour: the left band that only the left imager sees, 75 px of 848
+# on a D435 (60-90 px reported), the same fraction on a D455.
+_REALSENSE_MARGIN = DeadMargin(left=75 / 848)
+# Azure Kinect NFOV unbinned: a hexagon-like valid area, the corners cut off.
+_AZURE_NFOV_MARGIN = DeadMargin(corner=0.2)
+# Kinect v2 registered to colour: the colour camera's 84 degrees across against the depth
+# camera's 70.6 leave a band on either side (about 10 % of the width each).
+_KINECT_V2_MARGIN = DeadMargin(left=0.105, right=0.105)
+
+
+@dataclass(frozen=True)
 class SensorModel:
     """One camera model: registered depth intrinsics and the depth noise parameters.
 
@@ -42,6 +102,8 @@ class SensorModel:
     for stereo (the depth imager's focal length in the colour image's pixels is used, since
     depth is registered to colour); ``tof_sigma_m`` is the ToF noise at 1 m and full amplitude.
     ``color_encoding`` is what the vendor's ROS driver publishes on its colour topic.
+    ``margin``: the registered depth's dead margins (``None``: a reading can come from any
+    pixel; ``dataclasses.replace(model, margin=None)`` renders a bag's twin without them).
     """
 
     name: str
@@ -53,6 +115,7 @@ class SensorModel:
     baseline_m: float = 0.0
     disparity_sigma_px: float = 0.0
     tof_sigma_m: float = 0.0
+    margin: DeadMargin | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -61,23 +124,31 @@ class SensorModel:
 
 
 SENSORS: dict[str, SensorModel] = {m.name: m for m in (
-    SensorModel('kinect_v1', 'structured_light', KINECT_640, 0.4, 8.0),
+    SensorModel('kinect_v1', 'structured_light', KINECT_640, 0.4, 8.0,
+                margin=_PRIMESENSE_MARGIN),
     SensorModel('xtion', 'structured_light', Intrinsics(570.3, 570.3, 319.5, 239.5, 640, 480),
-                0.4, 8.0, color_encoding='bgr8'),
+                0.4, 8.0, color_encoding='bgr8', margin=_PRIMESENSE_MARGIN),
     SensorModel('azure_nfov', 'tof', Intrinsics(504.0, 504.0, 319.5, 287.5, 640, 576), 0.5,
-                3.86, color_encoding='bgr8', tof_sigma_m=0.0012),
+                3.86, color_encoding='bgr8', tof_sigma_m=0.0012, margin=_AZURE_NFOV_MARGIN),
     SensorModel('kinect_v2', 'tof', Intrinsics(365.5, 365.5, 255.5, 211.5, 512, 424), 0.5,
-                4.5, color_encoding='bgr8', tof_sigma_m=0.0015),
+                4.5, color_encoding='bgr8', tof_sigma_m=0.0015, margin=_KINECT_V2_MARGIN),
     SensorModel('d435', 'stereo', Intrinsics(606.0, 606.0, 423.5, 239.5, 848, 480), 0.3, 8.0,
-                baseline_m=0.050, disparity_sigma_px=0.08),
+                baseline_m=0.050, disparity_sigma_px=0.08, margin=_REALSENSE_MARGIN),
     SensorModel('d455', 'stereo', Intrinsics(640.0, 640.0, 639.5, 359.5, 1280, 720), 0.4,
-                8.0, baseline_m=0.095, disparity_sigma_px=0.08),
+                8.0, baseline_m=0.095, disparity_sigma_px=0.08, margin=_REALSENSE_MARGIN),
 )}
+
+
+def without_margin(model: SensorModel) -> SensorModel:
+    """``model`` rendering every pixel (the twin of a bag without dead margins)."""
+    return replace(model, margin=None)
 
 
 def sensor_depth(ren: Rendered, model: SensorModel,
                  rng: np.random.Generator) -> npt.NDArray[np.float32]:
-    """Noisy registered depth (H, W) float32 m, NaN = no reading, of ``ren`` seen by ``model``."""
+    """Noisy registered depth (H, W) float32 m, NaN = no reading, of ``ren`` seen by ``model``,
+    its dead margins included. The margins are applied last and draw nothing, so a twin
+    without them (``without_margin``) has the same readings everywhere else."""
     if (ren.z.shape[1], ren.z.shape[0]) != (model.intrinsics.width, model.intrinsics.height):
         msg = (f'render is {ren.z.shape[1]}x{ren.z.shape[0]} but sensor {model.name!r} is '
                f'{model.intrinsics.width}x{model.intrinsics.height}')
@@ -85,10 +156,13 @@ def sensor_depth(ren: Rendered, model: SensorModel,
     if model.kind == 'structured_light':
         out = structured_light.depth_image(ren, rng)
         out[(out < model.z_min) | (out > model.z_max)] = np.nan
-        return out
-    if model.kind == 'tof':
-        return tof_depth(ren, model, rng)
-    return stereo_depth(ren, model, rng)
+    elif model.kind == 'tof':
+        out = tof_depth(ren, model, rng)
+    else:
+        out = stereo_depth(ren, model, rng)
+    if model.margin is not None:
+        out[_margin_mask(model.margin, model.intrinsics.width, model.intrinsics.height)] = np.nan
+    return out
 
 
 def _edges(z: npt.NDArray[np.float32], rel: float = 0.04, floor: float = 0.08

@@ -47,7 +47,7 @@ from .pan import Pan
 from .render import Background, Camera, render, static_layer
 from .room import BUILDERS, ROOMS, background_entity, scatter, sight_lines
 from .sensor import color_image, depth_to_mm
-from .sensors import SENSORS, sensor_depth
+from .sensors import SENSORS, sensor_depth, without_margin
 from .skeleton_body import BodyStyle, build_body, carry_pose, scale_to_height, standing_height
 from .views import FARTHEST_M, NEAREST_M, View, aim_camera, effective_kind, place
 
@@ -91,7 +91,9 @@ class BagSpec:
     """Everything needed to render one bag. ``attributes`` lacks ``truncated``, which is
     measured while rendering (a ground-truth point projects outside the image). ``furnish``:
     one of ``FURNISH``; ``pan``: the camera's one turn (``None``: a static camera); ``suite``:
-    the suite's name in the bag's details."""
+    the suite's name in the bag's details; ``margins``: the sensor's dead margins of registered
+    depth (``sensors.DeadMargin``) are rendered (false: its twin without them, for
+    comparison)."""
 
     name: str
     people: tuple[PersonSpec, ...]
@@ -104,6 +106,7 @@ class BagSpec:
     furnish: str = 'scatter'
     pan: Pan | None = None
     suite: str = 'mocap'
+    margins: bool = True
 
     def __post_init__(self) -> None:
         problems = []
@@ -212,12 +215,13 @@ def catalogue_index(clips: Sequence[MotionClip],
 
 
 def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int = 0,
-                max_s: float = FULL_MAX_S,
-                catalogue: Sequence[str] | None = None) -> list[BagSpec]:
+                max_s: float = FULL_MAX_S, catalogue: Sequence[str] | None = None,
+                margins: bool = True) -> list[BagSpec]:
     """The suite's bag specs for ``clips``: quick = ``QUICK_BAGS`` bags (clips repeat if
     fewer) of ``QUICK_FRAMES`` frames; full = one bag per clip, each up to ``max_s`` s (its
     most active segment), plus one multi-person bag for each clip in the first eighth of the
-    catalogue (``catalogue_index``, which numbers the full suite's bags)."""
+    catalogue (``catalogue_index``, which numbers the full suite's bags). ``margins``: false
+    renders every bag without its sensor's dead margins (same names: a twin for comparison)."""
     if not clips:
         msg = 'the mocap suite needs at least one clip'
         raise ValueError(msg)
@@ -232,7 +236,7 @@ def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
             rng = np.random.default_rng([seed, 7, i])
             specs.append(draw_spec(i, order[i % len(order)], order, pos, QUICK_FRAMES,
                                    _PEOPLE[i % len(_PEOPLE)], rng, quick))
-        return specs
+        return set_margins(specs, margins)
     index = catalogue_index(order, catalogue)
     total = len(index)
     # One bag per clip (the first pass over the catalogue), then the multi-person bags of the
@@ -244,7 +248,15 @@ def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
         rng = np.random.default_rng([seed, 7, i])
         n = int(min(len(pos[clip.name]), max(2, round(max_s * FPS))))
         specs.append(draw_spec(i, clip, order, pos, n, people, rng, quick, lap=lap))
-    return specs
+    return set_margins(specs, margins)
+
+
+def set_margins(specs: Sequence[BagSpec], margins: bool) -> list[BagSpec]:
+    """``specs`` rendering (or not) their sensors' dead margins, as their attribute
+    ``margins`` says."""
+    return [dataclasses.replace(s, margins=margins,
+                                attributes={**s.attributes, 'margins': margins})
+            for s in specs]
 
 
 def draw_spec(i: int, clip: MotionClip, order: list[MotionClip], pos: dict, n: int,
@@ -328,7 +340,8 @@ class BagRenderer:
             msg = f'bag {spec.name!r}: clips not in the catalogue: {", ".join(missing)}'
             raise KeyError(msg)
         self.spec = spec
-        self.model = SENSORS[spec.sensor]
+        self.model = SENSORS[spec.sensor] if spec.margins else without_margin(
+            SENSORS[spec.sensor])
         self.truncated = False
         self.joints: list[npt.NDArray[np.float64]] = []
         kinds = []
@@ -496,6 +509,7 @@ class BagRenderer:
         out['distance_m'] = round(-float(self.joints[0][:, _J['pelvis'], 2].mean()), 2)
         out['truncated'] = self.truncated
         out['clutter'] = list(self.clutter)
+        out['margins'] = self.model.margin is not None
         return out
 
     def details(self) -> dict[str, Any]:
