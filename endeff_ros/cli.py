@@ -3,7 +3,11 @@
 Subcommands register themselves in ``SUBCOMMANDS`` as ``name -> 'module:function'``; the module
 is imported only when that subcommand runs, so ``endeff synth`` never imports rclpy and
 ``endeff --help`` stays fast. Each module provides ``add_arguments(parser)`` and
-``run(args) -> int`` (the exit status).
+``run(args) -> int`` (the exit status: :mod:`endeff_ros.cli_common` lists them).
+
+An OSError that a subcommand did not handle (an output that became unwritable while it ran, a
+disk that filled up) ends the command with one line naming the path and the problem, status 1,
+instead of a traceback.
 """
 
 from __future__ import annotations
@@ -15,7 +19,15 @@ import sys
 import threading
 from typing import Any
 
-from endeff_ros.cli_common import Terminated, raise_terminated
+from endeff_ros.cli_common import (
+    EXIT_FAILED,
+    EXIT_SIGINT,
+    EXIT_SIGTERM,
+    EXIT_USAGE,
+    Terminated,
+    os_error_text,
+    raise_terminated,
+)
 
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'synth': ('endeff_ros.synth.cli', 'Generate synthetic RGB-D benchmark bags.'),
@@ -43,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     if not argv or argv[0] not in SUBCOMMANDS:
         parser.parse_args(argv)  # prints usage / error and exits
-        return 2
+        return EXIT_USAGE
     name, rest = argv[0], argv[1:]
     module = importlib.import_module(SUBCOMMANDS[name][0])
     sub = argparse.ArgumentParser(prog=f'endeff {name}', description=SUBCOMMANDS[name][1])
@@ -56,7 +68,10 @@ def main(argv: list[str] | None = None) -> int:
         return int(module.run(args) or 0)
     except KeyboardInterrupt as err:
         print(f'endeff {name}: interrupted', file=sys.stderr)
-        return 143 if isinstance(err, Terminated) else 130
+        return EXIT_SIGTERM if isinstance(err, Terminated) else EXIT_SIGINT
+    except OSError as err:
+        print(f'endeff {name}: {os_error_text(err)}', file=sys.stderr)
+        return EXIT_FAILED
     finally:
         _on_sigterm(previous)
 

@@ -2,13 +2,32 @@
 
 Subcommand modules (``endeff_ros.bag.process``, ``endeff_ros.evaluate``...) import these from
 here rather than from the top-level CLI, so that a lower layer never imports the entry point.
+
+Exit statuses, the same for every ``endeff`` command (a script can tell what went wrong
+without reading the message, which is always one line on stderr naming what is wrong):
+
+- 0 (:data:`EXIT_OK`): everything asked was done;
+- 1 (:data:`EXIT_FAILED`): the work began and part of it failed (a bag that cannot be read, a
+  sequence that failed, an output that could not be written); the rest was done;
+- 2 (:data:`EXIT_USAGE`): refused before any work, as argparse does for bad options: an
+  unusable option value (``--jobs 0``), an input path that does not exist or holds no bag,
+  an output that cannot be written, a parameter file that cannot be loaded;
+- 130 (:data:`EXIT_SIGINT`): interrupted by Ctrl-C (SIGINT), 143 (:data:`EXIT_SIGTERM`):
+  by SIGTERM; the unfinished outputs are removed and no worker process is left.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from typing import Any
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_USAGE = 2
+EXIT_SIGINT = 130
+EXIT_SIGTERM = 143
 
 
 class Terminated(KeyboardInterrupt):
@@ -19,6 +38,33 @@ class Terminated(KeyboardInterrupt):
 def raise_terminated(signum: int, _frame: Any) -> None:
     """A SIGTERM handler: raise :class:`Terminated`."""
     raise Terminated(signum)
+
+
+def positive_int(text: str) -> int:
+    """argparse ``type`` of a count that must be at least 1 (``--jobs``): ``--jobs 0`` or
+    ``-3`` is refused with a usage error (status 2) instead of silently meaning something."""
+    try:
+        value = int(text)
+    except ValueError:
+        msg = f'expected a whole number >= 1, got {text!r}'
+        raise argparse.ArgumentTypeError(msg) from None
+    if value < 1:
+        msg = f'must be at least 1, got {value}'
+        raise argparse.ArgumentTypeError(msg)
+    return value
+
+
+def usage_error(prog: str, message: str) -> SystemExit:
+    """Print ``prog: message`` on stderr; the SystemExit (status 2) for the caller to raise."""
+    print(f'{prog}: {message}', file=sys.stderr)
+    return SystemExit(EXIT_USAGE)
+
+
+def os_error_text(err: OSError) -> str:
+    """One line for an OSError: the path(s) it names and the problem, without the errno."""
+    names = [str(n) for n in (err.filename, err.filename2) if n is not None]
+    problem = err.strerror or str(err) or type(err).__name__
+    return f'{" -> ".join(names)}: {problem}' if names else problem
 
 
 def print_json(data: Any, path: str | None = None) -> None:
@@ -44,5 +90,4 @@ def load_params_option(path: str | None, prog: str) -> Any:
     try:
         return load_yaml(path)
     except (OSError, EndeffError) as err:
-        print(f'{prog}: cannot load parameters {path}: {err}', file=sys.stderr)
-        raise SystemExit(2) from err
+        raise usage_error(prog, f'cannot load parameters {path}: {err}') from err

@@ -8,7 +8,8 @@ the temporal :class:`~endeff_ros.core.tracker.Tracker` and to the single-frame
 
 Output: a table on stdout, optionally the JSON report (``--json``, the spec's form plus extra
 keys ``per_frame``, ``groups``, ``kinds``, ``failed``...) and plots (``--plots``). Progress and
-the topic choice per bag go to stderr. Exit status 1 if any bag failed, else 0.
+the topic choice per bag go to stderr. Exit status 1 if any bag failed, 2 if an input path
+or an output cannot be used (before any work), else 0 (:mod:`endeff_ros.cli_common`).
 
 Groups: the paper suite's named groups (``no_occlusion``, ``occlusion``, ``generic``), and one
 group per value of every attribute that bags record in their metadata
@@ -25,7 +26,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 import time
 import traceback
@@ -48,7 +48,13 @@ from endeff_ros.bag.reader import (
     options_for_workers,
     options_from_args,
 )
-from endeff_ros.cli_common import load_params_option
+from endeff_ros.cli_common import (
+    EXIT_FAILED,
+    EXIT_OK,
+    load_params_option,
+    positive_int,
+    usage_error,
+)
 from endeff_ros.core.cloud import box_mask
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
@@ -91,7 +97,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--plots', metavar='DIR', help='write PNG plots into this directory')
     parser.add_argument('--params', metavar='YAML',
                         help='parameter file (ROS 2 parameter YAML or flat mapping)')
-    parser.add_argument('--jobs', type=int, default=1, metavar='N',
+    parser.add_argument('--jobs', type=positive_int, default=1, metavar='N',
                         help='bags evaluated in parallel processes (default 1)')
     add_reader_arguments(parser)
 
@@ -427,10 +433,11 @@ def _num(v: float | None, fmt: str) -> str:
     return '-' if v is None else format(v, fmt)
 
 
-def format_table(report: dict[str, Any]) -> str:
+def format_table(report: dict[str, Any], *, failed: bool = True) -> str:
     """Plain-text table of the report: sequences (with their split when attributes give one),
     the paper suite's groups, one section per attribute, overall; then recall and mean error
-    per end-effector kind."""
+    per end-effector kind; then the failed bags, unless ``failed`` is False (``endeff eval``
+    prints them on stderr, once)."""
     def cols(d: dict[str, Any]) -> str:
         return (f'{_num(d["recall"], ".3f"):>7} {_num(d["mean_error_m"], ".3f"):>7} '
                 f'{_num(d["fpr"], ".3f"):>7}')
@@ -478,7 +485,7 @@ def format_table(report: dict[str, Any]) -> str:
     kinds = _kind_table(report, width)
     if kinds:
         lines += ['', *kinds]
-    for f in report.get('failed', []):
+    for f in report.get('failed', []) if failed else []:
         lines.append(f'FAILED {f["bag"]}: {f["error"]}')
     return '\n'.join(line.rstrip() for line in lines)
 
@@ -637,15 +644,20 @@ def evaluate_bags(paths: Sequence[str | Path], *, params: EndeffParams | None = 
 
 
 def run(args: argparse.Namespace) -> int:
-    """``endeff eval``: print the table, write JSON and plots; 1 if any bag failed."""
+    """``endeff eval``: print the table, write JSON and plots; 1 if any bag failed, 2 if an
+    input or output path cannot be used (then nothing is read)."""
     params = load_params_option(args.params, 'endeff eval')
-    # Output problems end the command before any bag is read.
+    # Output and input problems end the command before any bag is read.
     check_output_option(args.json, 'endeff eval')
     check_output_option(args.plots, 'endeff eval', kind='dir')
-    jobs = args.jobs if args.jobs and args.jobs > 0 else (os.cpu_count() or 1)
-    report, _ = evaluate_bags(args.bags, params=params, options=options_from_args(args),
-                              jobs=jobs)
-    print(format_table(report))
+    try:
+        bags = find_bags(args.bags)
+    except BagError as err:
+        raise usage_error('endeff eval', str(err)) from err
+    report, _ = evaluate_bags(bags, params=params, options=options_from_args(args),
+                              jobs=args.jobs)
+    if report['sequences']:
+        print(format_table(report, failed=False))
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         with open(args.json, 'w', encoding='utf-8') as fh:
@@ -660,4 +672,4 @@ def run(args: argparse.Namespace) -> int:
             _stderr(f'endeff eval: no plots: {err} (install python3-matplotlib)')
     for f in report['failed']:
         _stderr(f'endeff eval: FAILED {f["error"]}')
-    return 1 if report['failed'] or not report['sequences'] else 0
+    return EXIT_FAILED if report['failed'] or not report['sequences'] else EXIT_OK

@@ -31,7 +31,7 @@ import numpy as np
 
 from endeff_ros.attributes import custom_data
 from endeff_ros.bag.reader import BagReader
-from endeff_ros.cli_common import load_params_option, print_json
+from endeff_ros.cli_common import load_params_option, positive_int, print_json
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.tracker import Tracker
@@ -149,7 +149,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('folder', help='folder holding the rooms suite bags')
     parser.add_argument('--params', help='parameter YAML (default: the defaults)')
-    parser.add_argument('--jobs', type=int, default=1)
+    parser.add_argument('--jobs', type=positive_int, default=1,
+                        help='bags checked in parallel processes (default 1)')
     parser.add_argument('--json', help='also write the report here')
     args = parser.parse_args(argv)
     params = load_params_option(args.params, 'pan_check')

@@ -9,7 +9,7 @@ from typing import Any
 
 from endeff_ros.bag.errors import BagError
 from endeff_ros.bag.reader import find_bags
-from endeff_ros.cli_common import load_params_option
+from endeff_ros.cli_common import load_params_option, positive_int
 from endeff_ros.core.params import EndeffParams
 
 
@@ -27,7 +27,8 @@ def parse_bag_args(doc: str, argv: list[str] | None, name: str,
     parser.add_argument('bags', nargs='+', help='bags, or folders holding bags')
     parser.add_argument('--every', type=int, default=1, help='every N-th bag (sorted by name)')
     parser.add_argument('--params', help='parameter YAML (default: the defaults)')
-    parser.add_argument('--jobs', type=int, default=1)
+    parser.add_argument('--jobs', type=positive_int, default=1,
+                        help='bags checked in parallel processes (default 1)')
     parser.add_argument('--json', help='also write the report here')
     args = parser.parse_args(argv)
     params = load_params_option(args.params, name)

@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from endeff_ros.cli_common import Terminated, load_params_option
+from endeff_ros.cli_common import Terminated, load_params_option, positive_int
 from endeff_ros.core.errors import EndeffError, InputError
 
 from . import progress as prog
@@ -100,7 +100,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='replace existing output bags written by endeff process')
     parser.add_argument('--params', metavar='YAML',
                         help='parameter file (ROS 2 parameter YAML or flat mapping)')
-    parser.add_argument('--jobs', type=int, default=None, metavar='N',
+    parser.add_argument('--jobs', type=positive_int, default=None, metavar='N',
                         help='bags processed in parallel (default: number of cores)')
     parser.add_argument('--copy-input', action='store_true',
                         help='also copy every input topic into the output bag')
@@ -421,9 +421,6 @@ def run(args: argparse.Namespace) -> int:
     """``endeff process``: 0 if every bag was processed, 1 if any failed, 2 on bad options
     or outputs (reported before any bag is read), 130 / 143 when interrupted."""
     params = load_params_option(args.params, 'endeff process')
-    if args.jobs is not None and args.jobs < 1:
-        print('endeff process: --jobs must be >= 1', file=sys.stderr)
-        return 2
     try:
         inputs = find_bags(args.inputs)
     except BagError as err:

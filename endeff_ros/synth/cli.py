@@ -20,6 +20,8 @@ import sys
 import time
 from pathlib import Path
 
+from endeff_ros.bag.outputs import check_output_option
+from endeff_ros.cli_common import positive_int
 from endeff_ros.workers import run_jobs
 
 from .sequences import GROUPS, SEQUENCES, SPECS
@@ -52,7 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--no-margins', action='store_true',
                         help="mocap, rooms: render depth without the sensors' dead margins "
                              '(twins of the default bags, same names, for comparison)')
-    parser.add_argument('--jobs', type=int, default=0,
+    parser.add_argument('--jobs', type=positive_int, default=None, metavar='N',
                         help='worker processes (default: number of CPUs)')
 
 
@@ -83,7 +85,7 @@ def generate_one(name: str, out: Path, storages: list[str], quick: bool, seed: i
 
 
 def generate(out: Path, names: list[str], storages: list[str], *, quick: bool = False,
-             seed: int = 0, jobs: int = 0) -> dict[str, int]:
+             seed: int = 0, jobs: int | None = None) -> dict[str, int]:
     """Generate the bags of ``names``; returns frames written per sequence."""
     jobs = jobs or os.cpu_count() or 1
     jobs = max(1, min(jobs, len(names)))
@@ -200,9 +202,12 @@ def run_mocap(args: argparse.Namespace, storages: list[str]) -> int:
 def run(args: argparse.Namespace) -> int:
     suite = getattr(args, 'suite', 'paper')
     clips_suite = suite in ('mocap', 'rooms')
-    if args.out is None and not (clips_suite and getattr(args, 'list', False)):
+    listing = clips_suite and getattr(args, 'list', False)
+    if args.out is None and not listing:
         print('endeff synth: --out is required', file=sys.stderr)
         return 2
+    if not listing:  # an output that cannot be written: one line before any rendering
+        check_output_option(str(args.out), 'endeff synth', kind='dir')
     storage = args.storage or ('mcap' if clips_suite else 'both')
     storages = ['mcap', 'sqlite3'] if storage == 'both' else [storage]
     if clips_suite:
