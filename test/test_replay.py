@@ -234,3 +234,22 @@ def test_compare_drops_runs_the_three_cases_in_turn(monkeypatch):
     assert result['targets']['no_color']['met'] is True  # 2 ms over, 10 allowed
     monkeypatch.setattr(bench, 'DROP_TARGETS', {'no_color': ('p50', 1.5)})
     assert bench.compare_drops('bag', rounds=2)['targets']['no_color']['met'] is False
+
+
+def test_command_line_prints_usage_and_refuses_a_missing_bag(tmp_path: Path) -> None:
+    """``python -m tools.replay --help`` prints its usage (it printed nothing: the module had
+    no entry point); a bag that is not there is one line and status 2, before any DDS."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, '-m', 'tools.replay', '--help'], cwd=root,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith('usage: python -m tools.replay') and 'BAG' in done.stdout
+    assert '--rate' in done.stdout and '--namespace' in done.stdout
+    missing = tmp_path / 'nowhere'
+    done = subprocess.run([sys.executable, '-m', 'tools.replay', str(missing)], cwd=root,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2
+    assert done.stderr.splitlines() == [f'tools.replay: {missing}: no such file or directory']

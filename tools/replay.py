@@ -11,6 +11,10 @@ A camera that loses colour images is imitated by withholding every ``drop_color_
 colour image, or all of them (``no_color``: the colour topic is not even advertised);
 :func:`color_dropped_depth` names the depth images whose colour partner was withheld, so that a
 benchmark can report them apart from the bag's own unpaired images.
+
+Run as ``python -m tools.replay BAG`` it publishes a bag to a node that is already running
+(``endeff_node --ros-args -r __ns:=/camera``), as a camera driver would, at a fixed rate:
+``--help`` lists the options.
 """
 
 from __future__ import annotations
@@ -395,3 +399,77 @@ def _summary(sent: dict[int, int], outputs: dict[int, Output],
         out.update(latency_ms_p50=round(float(p50), 3), latency_ms_p95=round(float(p95), 3),
                    latency_ms_p99=round(float(p99), 3), latency_ms_max=round(float(lat.max()), 3))
     return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m tools.replay BAG``: publish a bag's camera messages to a running node."""
+    import signal
+    import sys
+
+    from endeff_ros.bag.errors import BagError
+    from endeff_ros.cli_common import Terminated, raise_terminated
+
+    parser = argparse.ArgumentParser(
+        prog='python -m tools.replay',
+        description='Publish the camera messages of a benchmark bag (colour, depth, camera '
+                    'info; raw, original stamps) under NAMESPACE at a fixed rate, as a camera '
+                    'driver would, for a node that is already running, e.g. `endeff_node '
+                    '--ros-args -r __ns:=/camera`. Ctrl-C stops.')
+    parser.add_argument('bag', metavar='BAG', help='benchmark bag (directory, .mcap or .db3)')
+    parser.add_argument('--namespace', default='/camera',
+                        help='namespace of the published topics (default /camera)')
+    parser.add_argument('--rate', type=float, default=30.0,
+                        help='depth images per second (default 30)')
+    parser.add_argument('--loops', type=positive_int, default=1,
+                        help='replay the bag this many times, re-stamped (default 1)')
+    parser.add_argument('--max-frames', type=positive_int, default=None, metavar='N',
+                        help='stop after N depth images')
+    parser.add_argument('--wait', type=float, default=10.0, metavar='S',
+                        help='seconds to wait for a subscriber of every input (default 10)')
+    color = parser.add_mutually_exclusive_group()
+    color.add_argument('--drop-color-every', type=positive_int, default=None, metavar='N',
+                       help='withhold every N-th colour image (a camera losing colour)')
+    color.add_argument('--no-color', action='store_true',
+                       help='no colour at all (the colour topic is not advertised)')
+    args = parser.parse_args(argv)
+    if not args.rate > 0:
+        parser.error(f'argument --rate: must be above 0, got {args.rate}')
+    try:
+        source = BagSource(args.bag)
+    except BagError as err:
+        print(f'tools.replay: {err}', file=sys.stderr)
+        return 2
+    previous = signal.signal(signal.SIGTERM, raise_terminated)
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    rclpy.init()
+    node = rclpy.create_node('endeff_replay')
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        with source:
+            kinds = tuple(k for k in KINDS if not (args.no_color and k == 'color'))
+            replayer = Replayer(node, args.namespace, kinds)
+            if not spin_until(executor, replayer.matched, args.wait):
+                print(f'tools.replay: warning: no subscriber of every input under '
+                      f'{args.namespace} after {args.wait:g} s; publishing anyway',
+                      file=sys.stderr)
+            stats = replay(executor, source, replayer, rate_hz=args.rate, loops=args.loops,
+                           max_frames=args.max_frames, drop_color_every=args.drop_color_every,
+                           no_color=args.no_color)
+        print(f'{source.name}: {len(stats.depth_sent)} depth images ({stats.messages} '
+              f'messages) published under {args.namespace} in {stats.seconds:.1f} s')
+        return 0
+    except KeyboardInterrupt as err:
+        print('tools.replay: interrupted', file=sys.stderr)
+        return 143 if isinstance(err, Terminated) else 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
