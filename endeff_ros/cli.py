@@ -69,11 +69,24 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt as err:
         print(f'endeff {name}: interrupted', file=sys.stderr)
         return EXIT_SIGTERM if isinstance(err, Terminated) else EXIT_SIGINT
+    except BrokenPipeError:  # stdout read by `head` or a pager that quit: not an error to report
+        _silence_stdout()
+        return EXIT_FAILED
     except OSError as err:
         print(f'endeff {name}: {os_error_text(err)}', file=sys.stderr)
         return EXIT_FAILED
     finally:
         _on_sigterm(previous)
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null, so that flushing it at exit does not raise BrokenPipeError
+    again (the recipe of Python's signal documentation)."""
+    import os
+
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
 
 
 def _on_sigterm(handler: Any) -> Any:
