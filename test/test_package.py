@@ -327,12 +327,64 @@ def test_package_xml() -> None:
     assert root.findtext('name') == PACKAGE
     deps = {e.text for e in root if e.tag in ('depend', 'exec_depend', 'build_depend')}
     required = {'rclpy', 'sensor_msgs', 'visualization_msgs', 'std_msgs', 'python3-numpy',
-                'python3-scipy', 'python3-opencv', 'rosbags'}
+                'python3-scipy', 'python3-opencv', 'python3-rosbags-pip'}
     assert required <= deps, f'missing dependency keys: {sorted(required - deps)}'
     assert root.find('export/build_type') is not None
     assert root.findtext('export/build_type') == 'ament_python'
     for tag in ('description', 'maintainer', 'license'):
         assert (root.findtext(tag) or '').strip(), f'package.xml lacks <{tag}>'
+
+
+#: rosdep key of each imported distribution whose key is not its module name (ROS packages'
+#: keys are their names). rosbags and mcap have no Debian package: pip keys (rosdistro's
+#: rosdep/python.yaml has no key for mcap itself; mcap-ros2-support installs it, and mcap
+#: brings zstandard).
+ROSDEP_KEYS = {'cv2': 'python3-opencv', 'numpy': 'python3-numpy', 'scipy': 'python3-scipy',
+               'yaml': 'python3-yaml', 'matplotlib': 'python3-matplotlib',
+               'tqdm': 'python3-tqdm', 'rosbags': 'python3-rosbags-pip',
+               'mcap': 'mcap-ros2-support', 'zstandard': 'mcap-ros2-support'}
+#: Imported but deliberately not declared, and why.
+NOT_DECLARED = {
+    'pybullet_data': 'only the default --from of `endeff mocap-fetch deepmimic` (a data '
+                     'fetch); without pybullet the command asks for --from',
+}
+
+
+def _third_party_imports(paths: list[Path]) -> dict[str, str]:
+    """Top-level modules imported by ``paths`` outside the standard library and the package,
+    each with one file importing it."""
+    import ast
+
+    found: dict[str, str] = {}
+    for path in paths:
+        for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+            if isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names = [node.module]
+            else:
+                continue
+            for name in names:
+                top = name.split('.')[0]
+                if top not in sys.stdlib_module_names and top != PACKAGE:
+                    found.setdefault(top, str(path.relative_to(REPO)))
+    return found
+
+
+def test_every_runtime_import_is_declared_in_package_xml() -> None:
+    """rosdep installs what package.xml declares, nothing else: an import without its key
+    breaks the package on a robot (mcap, imported by bag/salvage.py, was missing)."""
+    root = ET.parse(REPO / 'package.xml').getroot()
+    declared = {e.text for e in root if e.tag in ('depend', 'exec_depend')}
+    paths = sorted((REPO / PACKAGE).rglob('*.py')) + sorted((REPO / 'launch').glob('*.py'))
+    imports = _third_party_imports(paths)
+    assert {'rclpy', 'numpy', 'mcap', 'rosbags'} <= set(imports)  # the scan sees imports
+    missing = {f'{ROSDEP_KEYS.get(m, m)} (import {m} in {where})'
+               for m, where in imports.items()
+               if m not in NOT_DECLARED and ROSDEP_KEYS.get(m, m) not in declared}
+    assert not missing, f'package.xml lacks: {sorted(missing)}'
+    stale = set(NOT_DECLARED) - set(imports)
+    assert not stale, f'NOT_DECLARED lists modules no longer imported: {sorted(stale)}'
 
 
 def test_package_version_matches_setup() -> None:
