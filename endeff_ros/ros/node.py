@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import gc
 import json
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -29,7 +30,7 @@ import cv2
 import numpy as np
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.clock import JumpThreshold
+from rclpy.clock import Clock, ClockType, JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
@@ -66,6 +67,41 @@ _COMPRESSED = {'color': 'color/image_raw/compressed', 'depth': 'depth/image_raw/
 MIN_IMAGE_SIDE = 8
 #: How often ``image_transport: auto`` looks for publishers until an image input has a message.
 _AUTO_PERIOD_S = 0.5
+#: An input silent this long (s) is named in a warning, repeated at this period while it stays
+#: silent: a node that waits for a camera that is not there (a topic not remapped, a driver
+#: not started, another ROS domain) says so instead of sitting there quietly.
+NO_INPUT_WARN_S = 5.0
+
+USAGE = """usage: endeff_node [-h] [--ros-args [-r __ns:=/camera] [-r FROM:=TO ...]
+                   [--params-file FILE] [-p NAME:=VALUE ...]]
+
+End-effectors of people and articulated entities in an RGB-D stream, tracked over time
+(Lin, Pardas & Casas, 2016).
+
+subscribes (relative names, remappable with -r):
+  color/image_raw       sensor_msgs/Image (rgb8, bgr8, mono8); optional (use_color)
+  depth/image_raw       sensor_msgs/Image registered to colour: 16UC1 mm or 32FC1 m
+  depth/camera_info     sensor_msgs/CameraInfo
+  (image_transport compressed/auto: .../compressed, .../compressedDepth)
+publishes:
+  end_effectors         sensor_msgs/PointCloud2: x y z id entity geodesic confidence state
+  end_effectors/markers visualization_msgs/MarkerArray (built only for subscribers)
+  debug/bands, debug/image (optional), /diagnostics
+service:
+  ~/reset_background    std_srvs/Trigger: learn the static background again
+
+ROS arguments follow --ros-args:
+  -r __ns:=/camera                    namespace of the topics above
+  -r depth/image_raw:=/other/topic    remap one input to a driver's topic
+  --params-file config/endeff.yaml    parameters (`endeff params` lists them all)
+  -p use_color:=false                 one parameter
+
+example:
+  endeff_node --ros-args -r __ns:=/camera --params-file config/endeff.yaml
+
+options:
+  -h, --help  show this help and exit
+"""
 
 
 def _stamp(msg: Any) -> int:
@@ -133,6 +169,10 @@ class EndeffNode(Node):
                                                         self.reset_background)
         self._worker = threading.Thread(target=self._run, name='endeff_worker', daemon=True)
         self._worker.start()
+        self._heard = dict(self.stats.received)
+        self._silence = self.create_timer(NO_INPUT_WARN_S, self._warn_silent_inputs,
+                                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.get_logger().info(f'waiting for {_listing(self._input_topics())}')
 
     def _warm_up(self) -> None:
         """First-frame costs paid before subscribing (:mod:`endeff_ros.core.warmup`)."""
@@ -181,6 +221,23 @@ class EndeffNode(Node):
                 self._subs[kind] = self._subscribe(kind, compressed=True)
         if not waiting and self._auto is not None:
             self._auto.cancel()
+
+    def _input_topics(self, kinds: Any = None) -> list[str]:
+        """Resolved names of the subscribed inputs (of ``kinds``), depth first."""
+        order = [k for k in ('depth', 'camera_info', 'color') if k in self._subs]
+        return [self._subs[k].topic_name for k in order if kinds is None or k in kinds]
+
+    def _warn_silent_inputs(self) -> None:
+        """Every NO_INPUT_WARN_S (steady time: a simulated clock that has not started does not
+        stop it): name the inputs that received nothing since the previous call."""
+        silent = [k for k, n in self.stats.received.items()
+                  if k in self._subs and n == self._heard.get(k, 0)]
+        self._heard = dict(self.stats.received)
+        if silent:
+            self.get_logger().warning(
+                f'no message for {NO_INPUT_WARN_S:g} s on {_listing(self._input_topics(silent))}'
+                ' (is the camera driver running, on this ROS_DOMAIN_ID, and are the inputs '
+                'remapped to its topics? `ros2 topic list` shows them)')
 
     def dropped(self) -> dict[str, int]:
         """Messages the synchroniser dropped unpaired, per input."""
@@ -414,13 +471,25 @@ class EndeffNode(Node):
         super().destroy_node()
 
 
-def main(args: list[str] | None = None) -> None:
-    """Entry point of ``ros2 run endeff_ros endeff_node``."""
+def _listing(names: list[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
+    return ' and '.join(names) if len(names) < 3 else f'{", ".join(names[:-1])} and {names[-1]}'
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``ros2 run endeff_ros endeff_node``: ``-h`` / ``--help`` before
+    ``--ros-args`` prints the usage and exits (it used to start the node)."""
+    argv = sys.argv[1:] if args is None else list(args)
+    own = argv[:argv.index('--ros-args')] if '--ros-args' in argv else argv
+    if '-h' in own or '--help' in own:
+        print(USAGE, end='')
+        return 0
     # One OpenCV thread: the node already runs DDS, executor and worker threads, and on a
     # robot's shared CPU a second flow thread only adds contention.
     cv2.setNumThreads(1)
     spin(EndeffNode, args)
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())
