@@ -9,6 +9,10 @@ object such as ``{"source": "cmu", "family": "walk", "split": "dev", "view": "si
 object is reported as a warning naming the bag, never an error, because the attributes only
 group the scores and must not stop a bag from being scored.
 
+Bags rendered before an attribute existed lack it; :data:`DEFAULTS` gives such bags (those with
+some attributes) the value they had: every bag of the suites was ``motion: active`` before the
+still and slow cases came.
+
 Groups are named ``key=value``. Continuous attributes would give one group per sequence, so the
 ones in :data:`BINS` are binned (``camera_height_m`` by the heights of a table, a tripod at
 chest height and a wall mount; ``distance_m`` by the near, middle and far part of a Kinect-class
@@ -34,6 +38,9 @@ BINS: dict[str, tuple[float, ...]] = {
     'distance_m': (2.0, 3.5),
 }
 """Bin edges (metres) of the numeric attributes that are binned: ``<a``, ``a-b``, ``>b``."""
+
+DEFAULTS: dict[str, Any] = {'motion': 'active'}
+"""Group values of attributes that a bag with attributes does not record (see above)."""
 
 
 def custom_data(reader: Any) -> dict[str, str]:
@@ -101,10 +108,13 @@ def attribute_groups(attributes: Sequence[tuple[str, Mapping[str, Any]]]
     """``{key: {"key=label": [sequence names]}}`` over ``(name, attributes)`` pairs.
 
     Keys in alphabetical order; labels in the order of their first sequence, except binned
-    attributes, whose bins follow the numeric order.
+    attributes, whose bins follow the numeric order. A sequence with attributes takes
+    :data:`DEFAULTS` for those it lacks; one without any forms no group.
     """
     out: dict[str, dict[str, list[str]]] = {}
     for name, attrs in attributes:
+        if attrs:
+            attrs = {**DEFAULTS, **attrs}
         for key, value in attrs.items():
             label = attribute_label(key, value)
             if label is not None:

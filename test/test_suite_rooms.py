@@ -28,8 +28,8 @@ from endeff_ros.synth.skeleton_body import BodyStyle
 from endeff_ros.synth.suite import DETAILS_KEY, BagRenderer, BagSpec, PersonSpec, write_bag
 from endeff_ros.synth.views import View
 
-NAME = re.compile(r'^(dev|test)__[A-Za-z0-9_-]+__(\d{3})-(front|side|back|across|towards)-'
-                  r'([a-z0-9_]+)-(empty|furnished)-p(\d)-(static|pan)$')
+NAME = re.compile(r'^(dev|test)__[A-Za-z0-9_-]+__(\d{3}|m\d\d)-(front|side|back|across|towards)-'
+                  r'([a-z0-9_]+)-(empty|furnished)-p(\d)-(static|pan)(-(still|slow)-[a-z0-9-]+)?$')
 
 
 @pytest.fixture(scope='module')
@@ -45,7 +45,7 @@ def specs(clips):
 
 
 def test_quick_specs_come_in_named_pairs(clips, specs):
-    assert len(specs) == 12 and specs == rooms_specs(clips, quick=True)
+    assert len(specs) == 16 and specs == rooms_specs(clips, quick=True)
     assert specs != rooms_specs(clips, quick=True, seed=1)
     assert all(s.people[0].clip != 'proc_sit' for s in specs)  # would sit on air
     split_of = {c.name: c.split for c in clips}
@@ -69,9 +69,12 @@ def test_quick_specs_come_in_named_pairs(clips, specs):
     assert {s.attributes['split'] for s in specs} == {'dev', 'test'}
     pans = [s for s in specs if s.attributes['camera'] == 'pan']
     static = [s for s in specs if s.attributes['camera'] == 'static']
-    assert len(pans) == 4 and len(static) == 8
+    still = [s for s in static if s.attributes['motion'] == 'still']
+    assert len(pans) == 4 and len(static) == 12 and len(still) == 4
+    assert {s.attributes['split'] for s in still} == {'dev', 'test'}
     assert all(s.pan is None and 'pan_s' not in s.attributes for s in static)
-    assert all(s.frames == QUICK_PAIR_FRAMES for s in static)
+    assert all(s.frames == QUICK_PAIR_FRAMES for s in static if s not in still)
+    assert all(s.frames == 90 and s.name.endswith('-static-still-breathing3s') for s in still)
     for s in pans:
         assert s.frames == QUICK_PAN_FRAMES and s.people[0].view.kind in ('front', 'side', 'back')
         assert 20 <= abs(s.pan.yaw_deg) <= 30 and s.pan.start_s == QUICK_PAN_START_S
@@ -83,7 +86,7 @@ def test_committed_catalogue_gives_the_quick_suite():
     from endeff_ros.synth.mocap.catalogue import load_clips
 
     specs = rooms_specs(load_clips(committed_only=True), quick=True)
-    assert len(specs) == 12 and {s.attributes['split'] for s in specs} == {'dev', 'test'}
+    assert len(specs) == 16 and {s.attributes['split'] for s in specs} == {'dev', 'test'}
     assert all(s.people[0].clip.startswith('deepmimic/') for s in specs)
 
 

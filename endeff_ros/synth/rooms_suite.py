@@ -82,15 +82,18 @@ def _reach(pos: npt.NDArray[np.float64], n: int) -> float:
     return float(np.linalg.norm(pel - pel[0], axis=1).max())
 
 
-def pair_specs(base: BagSpec, index: int, pan: Pan | None = None) -> list[BagSpec]:
+def pair_specs(base: BagSpec, index: int | str, pan: Pan | None = None,
+               suffix: str = '') -> list[BagSpec]:
     """The empty and the furnished bag of ``base`` (same people, frames, sensor and seed),
-    with the suite's names and attributes; ``pan``: the camera's turn (``None``: static)."""
+    with the suite's names and attributes; ``index``: the pair's number (or tag, ``m03``);
+    ``pan``: the camera's turn (``None``: static); ``suffix`` ends both names."""
     first = base.people[0]
     camera = 'static' if pan is None else 'pan'
     split = base.attributes['split']
     view = base.attributes['view']
-    stem = f'{split}__{safe_name(first.clip)}__{index:03d}-{view}-{base.sensor}'
-    names = [f'{stem}-{room}-p{len(base.people)}-{camera}' for room in ROOMS]
+    tag = index if isinstance(index, str) else f'{index:03d}'
+    stem = f'{split}__{safe_name(first.clip)}__{tag}-{view}-{base.sensor}'
+    names = [f'{stem}-{room}-p{len(base.people)}-{camera}{suffix}' for room in ROOMS]
     attrs = {**base.attributes, 'interaction': 'none', 'camera': camera, 'pair': names}
     if pan is not None:
         attrs['pan_s'] = [round(pan.start_s, 3), round(pan.end_s, 3)]
@@ -103,7 +106,9 @@ def pair_specs(base: BagSpec, index: int, pan: Pan | None = None) -> list[BagSpe
 def rooms_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int = 0,
                 margins: bool = True) -> list[BagSpec]:
     """The suite's bag specs for ``clips``, pair by pair (empty, then furnished), per split
-    (dev, then test) the static pairs and then the pan pairs. Clips of family ``sit`` are left
+    (dev, then test) the static pairs and then the pan pairs, then the still and slow pairs
+    of ``cases.py`` (``ROOMS_QUICK``, ``ROOMS_FULL``; names tagged ``m<kk>``, ending in
+    ``-<motion>-<case>``). Clips of family ``sit`` are left
     out: without their chair they would sit on air in the empty room. ``margins``: false
     renders the bags without the sensors' dead margins (same names)."""
     if not clips:
@@ -114,6 +119,8 @@ def rooms_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
     if not usable:
         msg = 'the rooms suite needs a clip of a family other than sit'
         raise ValueError(msg)
+    from .cases import ROOMS_FULL, ROOMS_QUICK, case_rows
+
     pos = {c.name: resampled(c) for c in order}
     n_pair = QUICK_PAIR_FRAMES if quick else round(PAIR_S * FPS)
     n_pan = QUICK_PAN_FRAMES if quick else round(PAN_BAG_S * FPS)
@@ -147,4 +154,7 @@ def rooms_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
             base = dataclasses.replace(base, people=(person,), frames=n_pan, attributes=attrs)
             specs += pair_specs(base, index, pan)
             index += 1
+    for k, row, base in case_rows(usable, pos, ROOMS_QUICK if quick else ROOMS_FULL, seed):
+        suffix = f'-{base.attributes["motion"]}-{row.label}'
+        specs += pair_specs(base, f'm{k:02d}', suffix=suffix)
     return set_margins(specs, margins)

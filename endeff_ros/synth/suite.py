@@ -43,6 +43,7 @@ from .frames import (
     sensed_visibility,
 )
 from .mocap.clip import JOINT_INDEX, MotionClip
+from .motion import CASES, person_joints
 from .pan import Pan
 from .render import Background, Camera, render, static_layer
 from .room import BUILDERS, ROOMS, background_entity, scatter, sight_lines
@@ -77,13 +78,23 @@ _SHOES = [(0.30, 0.18, 0.10), (0.08, 0.08, 0.08), (0.85, 0.85, 0.85)]
 
 @dataclass(frozen=True)
 class PersonSpec:
-    """One person of a bag: clip name, first frame of the segment (30 fps), body, view."""
+    """One person of a bag: clip name, first frame of the segment (30 fps), body, view, and
+    how the clip moves (``motion.person_joints``): ``case`` (``motion.CASES``), ``hold``
+    (frames still before leaving, or walking before stopping) and ``factor`` (slow-down)."""
 
     clip: str
     start: int
     body: BodyStyle
     view: View
     texture: int
+    case: str = 'segment'
+    hold: int = 0
+    factor: int = 1
+
+    def __post_init__(self) -> None:
+        if self.case not in CASES:
+            msg = f'case must be one of {sorted(CASES)}, got {self.case!r}'
+            raise ValueError(msg)
 
 
 @dataclass(frozen=True)
@@ -220,7 +231,8 @@ def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
     """The suite's bag specs for ``clips``: quick = ``QUICK_BAGS`` bags (clips repeat if
     fewer) of ``QUICK_FRAMES`` frames; full = one bag per clip, each up to ``max_s`` s (its
     most active segment), plus one multi-person bag for each clip in the first eighth of the
-    catalogue (``catalogue_index``, which numbers the full suite's bags). ``margins``: false
+    catalogue (``catalogue_index``, which numbers the full suite's bags); then, in both, the
+    still and slow bags of ``cases.py`` (``MOCAP_QUICK``, ``MOCAP_FULL``). ``margins``: false
     renders every bag without its sensor's dead margins (same names: a twin for comparison)."""
     if not clips:
         msg = 'the mocap suite needs at least one clip'
@@ -228,6 +240,8 @@ def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
     if not max_s > 0:
         msg = f'max_s must be positive, got {max_s}'
         raise ValueError(msg)
+    from .cases import MOCAP_FULL, MOCAP_QUICK, case_specs
+
     order = sorted(clips, key=lambda c: c.name)
     pos = {c.name: resampled(c) for c in order}
     specs = []
@@ -236,6 +250,7 @@ def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
             rng = np.random.default_rng([seed, 7, i])
             specs.append(draw_spec(i, order[i % len(order)], order, pos, QUICK_FRAMES,
                                    _PEOPLE[i % len(_PEOPLE)], rng, quick))
+        specs += case_specs(order, pos, MOCAP_QUICK, seed)
         return set_margins(specs, margins)
     index = catalogue_index(order, catalogue)
     total = len(index)
@@ -248,6 +263,7 @@ def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
         rng = np.random.default_rng([seed, 7, i])
         n = int(min(len(pos[clip.name]), max(2, round(max_s * FPS))))
         specs.append(draw_spec(i, clip, order, pos, n, people, rng, quick, lap=lap))
+    specs += case_specs(order, pos, MOCAP_FULL, seed)
     return set_margins(specs, margins)
 
 
@@ -322,7 +338,8 @@ def draw_spec(i: int, clip: MotionClip, order: list[MotionClip], pos: dict, n: i
              'view': view_kind, 'camera_height_m': round(cam_h, 2),
              'distance_m': round(dist, 2), 'sensor': sensor.name, 'room': room,
              'people': people, 'interaction': interaction, 'build': first.body.build,
-             'clothing': first.body.clothing, 'child': first.body.child}
+             'clothing': first.body.clothing, 'child': first.body.child,
+             'motion': CASES['segment'], 'case': 'segment'}
     return BagSpec(name, tuple(persons), n, room, interaction, sensor.name,
                    int(rng.integers(2**31)), attrs)
 
@@ -345,12 +362,11 @@ class BagRenderer:
         self.truncated = False
         self.joints: list[npt.NDArray[np.float64]] = []
         kinds = []
-        for p in spec.people:
+        for k, p in enumerate(spec.people):
             full = scale_to_height(resampled(clips[p.clip]), p.body.height_m)
-            seg = full[p.start:p.start + spec.frames]
-            if len(seg) < spec.frames:  # short clip: hold the last pose
-                seg = np.concatenate([seg, np.repeat(seg[-1:], spec.frames - len(seg), 0)])
-            placed, kind = place(seg, p.view)
+            seg, centre = person_joints(full, p.case, p.start, spec.frames, p.hold, p.factor,
+                                        np.random.default_rng([spec.seed, 5, k]))
+            placed, kind = place(seg, p.view, centre)
             self.joints.append(placed)
             kinds.append(kind)
         self.view_kind = kinds[0]
@@ -520,7 +536,8 @@ class BagRenderer:
                'roll_deg': round(float(np.rad2deg(cam.roll)), 2),
                'wall_z_m': round(cam.wall_z, 2), 'seed': self.spec.seed,
                'people': [{'clip': p.clip, 'start_frame': p.start, 'body': p.body.label,
-                           'view': asdict(p.view)} for p in self.spec.people]}
+                           'view': asdict(p.view), 'case': p.case, 'hold_frames': p.hold,
+                           'slow_factor': p.factor} for p in self.spec.people]}
         if self.spec.pan is not None:
             pan = self.spec.pan
             # Frame i is at i / FPS s for the motion and at T0_NS + i * PERIOD_NS in the bag.

@@ -102,8 +102,11 @@ def _angle(v: npt.ArrayLike) -> float:
     return float(np.arctan2(v[0], v[2]))
 
 
-def place(positions: npt.ArrayLike, view: View) -> tuple[npt.NDArray[np.float64], str]:
-    """(scene-frame joints (T, 22, 3), rendered view kind) of a body-frame segment."""
+def place(positions: npt.ArrayLike, view: View,
+          centre: slice | None = None) -> tuple[npt.NDArray[np.float64], str]:
+    """(scene-frame joints (T, 22, 3), rendered view kind) of a body-frame segment.
+    ``centre``: the frames whose mean pelvis goes to the view's place (default all; a person
+    who stands and then walks off is centred where they stand)."""
     p = np.asarray(positions, dtype=np.float64)
     kind = effective_kind(p, view.kind)
     s = float(view.side_sign)
@@ -115,9 +118,9 @@ def place(positions: npt.ArrayLike, view: View) -> tuple[npt.NDArray[np.float64]
         source = _angle(f)
         target = {'front': 0.0, 'side': s * np.pi / 2, 'back': np.pi}[kind]
     rot = rot_y(target - source)
-    pel = p[:, _J['pelvis']]
-    centre = np.array([pel[:, 0].mean(), 0.0, pel[:, 2].mean()])
-    out = (p - centre) @ rot.T
+    pel = p[slice(None) if centre is None else centre, _J['pelvis']]
+    mid = np.array([pel[:, 0].mean(), 0.0, pel[:, 2].mean()])
+    out = (p - mid) @ rot.T
     anchor = np.array([view.offset_x_m, 0.0, -view.distance_m])
     # Keep the pelvis within [NEAREST_M, FARTHEST_M]: pushed back first (an approaching walk
     # stops before the camera), then forward as far as that allows.
