@@ -174,8 +174,19 @@ def test_eval_ends_with_its_workers(tmp_path: Path, bags: Path, sig: int, group:
 
 @pytest.mark.parametrize(('sig', 'group'), [(signal.SIGINT, True), (signal.SIGTERM, False)])
 def test_synth_ends_with_its_workers(tmp_path: Path, sig: int, group: bool) -> None:
+    """...and the bags being written are removed: every bag left is complete (rosbags closes
+    an interrupted writer as a bag that looks complete, with fewer frames)."""
+    import yaml
+
+    from endeff_ros.synth.sequences import QUICK_FRAMES
+
     status, err, _ = _interrupt(tmp_path, ['synth', '--out', str(tmp_path / 'synth'),
                                            '--quick', '--storage', 'mcap', '--jobs', '2'],
-                                sig, group=group, delay=1.0)
+                                sig, group=group, delay=0.5, ready='synth/mcap/*')
     assert status == (130 if sig == signal.SIGINT else 143), err
     assert 'interrupted' in err and 'Traceback' not in err, err
+    for bag in (tmp_path / 'synth' / 'mcap').iterdir():
+        info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+        depth = [t['message_count'] for t in info['topics_with_message_count']
+                 if t['topic_metadata']['name'].endswith('depth/image_raw')]
+        assert depth == [QUICK_FRAMES], f'{bag.name} is not complete: {depth}'
