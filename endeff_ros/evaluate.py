@@ -116,6 +116,8 @@ def _background_estimate() -> EstimateFn:
             return estimate_frame(frame, params)
         estimate = estimate_frame(frame, params, background=model)
         model.observe_color(frame.color, frame.stamp_ns)
+        # Its end-effectors mark the entities of the start, as the tracker's tracks do.
+        model.mark(estimate.positions(), frame.intrinsics, params.pixel_stride)
         return estimate
 
     return estimate

@@ -1,4 +1,5 @@
-"""The node's ``~/reset_background`` service (std_srvs/Trigger), in-process over DDS."""
+"""The node's ``~/reset_background`` and ``~/learn_empty_background`` services
+(std_srvs/Trigger), in-process over DDS."""
 
 from __future__ import annotations
 
@@ -17,9 +18,11 @@ class BackgroundTracker:
     def __init__(self, params: EndeffParams) -> None:
         self.params = params
         self.relearns = 0
+        self.empty: list[bool] = []
 
-    def reset_background(self) -> None:
+    def reset_background(self, *, empty: bool = False) -> None:
         self.relearns += 1
+        self.empty.append(empty)
 
 
 class PlainTracker:
@@ -29,7 +32,7 @@ class PlainTracker:
         self.params = params
 
 
-def _call(factory, namespace: str):
+def _call(factory, namespace: str, service: str = 'reset_background'):
     from rclpy.executors import SingleThreadedExecutor
     from std_srvs.srv import Trigger
 
@@ -37,12 +40,12 @@ def _call(factory, namespace: str):
 
     node = EndeffNode(tracker_factory=factory, namespace=namespace)
     tester = rclpy.create_node('tester', namespace=namespace)
-    client = tester.create_client(Trigger, 'endeff_node/reset_background')
+    client = tester.create_client(Trigger, f'endeff_node/{service}')
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     executor.add_node(tester)
     try:
-        assert spin_until(executor, client.service_is_ready), 'no reset_background service'
+        assert spin_until(executor, client.service_is_ready), f'no {service} service'
         future = client.call_async(Trigger.Request())
         assert spin_until(executor, future.done)
         return node.tracker, future.result()
@@ -55,7 +58,13 @@ def _call(factory, namespace: str):
 def test_reset_background_service_relearns(ros_context):
     tracker, response = _call(BackgroundTracker, '/bg')
     assert response.success and 're-learnt' in response.message
-    assert tracker.relearns == 1
+    assert tracker.relearns == 1 and tracker.empty == [False]
+
+
+def test_learn_empty_background_service_learns_all_in_view(ros_context):
+    tracker, response = _call(BackgroundTracker, '/bg_empty', 'learn_empty_background')
+    assert response.success and 'empty room' in response.message
+    assert tracker.empty == [True]
 
 
 def test_reset_background_service_without_a_background(ros_context):

@@ -403,3 +403,31 @@ def test_cli_fetch_build_and_errors(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert len(gt) == 1 and gt[0] is not None and len(gt[0]) == n_labels
     assert realdata_main(['build', 'out', '--sources', 'nope', '--cache', 'c']) == 1
     assert "unknown source 'nope'" in capsys.readouterr().err
+
+
+def test_still_bags_play_each_frame_still_with_fresh_sensor_noise(tmp_path: Path) -> None:
+    """``build --still N``: one bag per frame, its N copies read again with noise (never
+    bit-identical, the scene itself unmoved) and the same labels, attribute motion=still."""
+    source, cache, depth = _labelled_frame(tmp_path)
+    path = tmp_path / 'still'
+    n = build_bag(source, path, cache=cache, repeat=6, frame=0, noise=True)
+    assert n == 6
+    with BagReader(path) as bag:
+        attributes = json.loads(custom_data(bag.reader)[ATTRIBUTES_KEY])
+        records = list(bag.frames())
+    assert attributes['motion'] == 'still' and attributes['repeat'] == 6
+    mm = [np.where(np.isfinite(f.depth), f.depth * 1000.0, 0.0) for f, _ in records]
+    read = depth > 0
+    for a, b in zip(mm, mm[1:]):
+        assert not np.array_equal(a, b)  # each copy read again
+    stack = np.stack(mm)
+    dropped = (stack == 0) & read
+    assert 0.003 < dropped.mean() < 0.03  # about 1 % of the readings
+    mean = np.where(dropped, np.nan, stack)
+    rel = np.nanmean(mean, axis=0)[read] / depth[read] - 1.0
+    assert abs(float(np.mean(rel))) < 5e-4  # unbiased: the scene did not move
+    assert 0.001 < float(np.nanstd(mean[:, read] / depth[read] - 1.0)) < 0.006
+    gts = [gt for _, gt in records]
+    assert all(np.array_equal(g, gts[0]) for g in gts)
+    with pytest.raises(ValueError, match='frames 0-0'):
+        build_bag(source, path, cache=cache, repeat=2, frame=3)

@@ -215,6 +215,11 @@ COLOR_CONFIRM_S = 0.2
 #: stirred on their component) at least this many times at the same depth are certified
 #: static at once: furniture a still person's arm joins in the first frame after learning.
 STILL_LEARNING_FRAMES = 2
+#: A component stays foreground as an entity of the start (``background_keep_initial``) while
+#: at least this fraction of its pixels (and MIN_CHANGED_PX) lie where such an entity was
+#: marked, at the depth it had: a still person joined by a shelf beside them is still kept,
+#: a wall that a marked hand once touched is not.
+INITIAL_FRACTION = 0.05
 
 
 def _margin(depth: npt.NDArray[np.float32], base: float) -> npt.NDArray[np.float32]:
@@ -305,6 +310,7 @@ class BackgroundModel:
         self.relearns = 0  # camera motions detected
         self.resets = 0  # re-learns asked for (reset())
         self._reset_requested = False
+        self._empty_requested = False
         self._moved_requested = False
         self._clear()
 
@@ -325,9 +331,13 @@ class BackgroundModel:
         self._offset = 0.0
         self._t = 0.0
 
-    def reset(self) -> None:
-        """Re-learn from the next frame (the ``reset_background`` service). Only sets a flag,
-        so it may be called from another thread than :meth:`foreground`'s."""
+    def reset(self, *, empty: bool = False) -> None:
+        """Re-learn from the next frame (the ``reset_background`` service). ``empty``: the
+        room is empty of people now (the ``learn_empty_background`` service), so what is in
+        view while learning is all background, entities with end-effectors included (not
+        kept as entities of the start, ``background_keep_initial``). Only sets flags, so it
+        may be called from another thread than :meth:`foreground`'s."""
+        self._empty_requested = empty
         self._reset_requested = True
 
     def camera_moved(self) -> None:
@@ -378,8 +388,10 @@ class BackgroundModel:
         return self._t
 
     def _learn(self, depth: npt.NDArray[np.float32], valid: npt.NDArray[np.bool_],
-               t: float, params: EndeffParams) -> None:
-        """Start learning from ``depth``: the background is the current frame."""
+               t: float, params: EndeffParams, *, initial: bool = False) -> None:
+        """Start learning from ``depth``: the background is the current frame. ``initial``:
+        a learning after the start or a reset (not a camera motion, not an empty room), whose
+        entities holding end-effectors are marked and kept (``background_keep_initial``)."""
         shape = depth.shape
         self._bg = np.where(valid, depth, 0).astype(np.float32)
         self._far_ref = np.zeros(shape, np.float32)
@@ -399,6 +411,9 @@ class BackgroundModel:
         self._seeded = False  # certified from the learning frames
         self._moving_labels = np.zeros(1, bool)
         self._out = np.zeros(shape, bool)
+        # Entities of the start: their pixels' depth when marked (0: not marked).
+        self._init_z = np.zeros(shape, np.float32)
+        self._marking = initial and params.background_keep_initial
         self._learn_until = t + params.background_learn_s
         self._settling = False
         # The grey images of earlier views say nothing of this one, but this frame's own (taken
@@ -497,8 +512,9 @@ class BackgroundModel:
         stride = params.pixel_stride
         if self._reset_requested or self._bg is None or self._bg.shape != d.shape:
             self.resets += self._reset_requested
-            self._reset_requested = self._moved_requested = False
-            self._learn(d, valid, t, params)
+            initial = not (self._reset_requested and self._empty_requested)
+            self._reset_requested = self._moved_requested = self._empty_requested = False
+            self._learn(d, valid, t, params, initial=initial)
             self._remember(stamp_ns, d, valid, candidate, params)
             if color is not None:  # the first grey image (nothing to compare it with yet)
                 self._evidence = self._color_evidence(color, self._last)
@@ -606,7 +622,9 @@ class BackgroundModel:
         n = int(labels.max()) + 1
         total = np.bincount(labels.ravel(), minlength=n)
         if t < self._learn_until:
-            if stirred is None:
+            if stirred is None or self._marking:
+                # Without colour, or while the entities of the start are marked (a person
+                # in view who keeps still stirs nothing): everything is kept.
                 return candidate.copy()
             # Learning with colour: only what stirs (a person present from the start has not
             # moved in depth yet; furniture does neither).
@@ -630,6 +648,7 @@ class BackgroundModel:
                                    cv2.MORPH_OPEN,
                                    np.ones((3, 3), np.uint8)).view(bool)
         moving = _enough(labels, changed, total, MIN_CHANGED_FRACTION, stride)
+        initial = self._initial_labels(d, labels, total, margin, adopt, stride)
         # Components with changed pixels renew the hold (below); one that moves by colour
         # alone only on the surface that also stirred within COLOR_CONFIRM_S.
         renew = np.take(moving, labels)  # moving[labels], 2-3x faster
@@ -651,8 +670,10 @@ class BackgroundModel:
         renew &= ~certifying
         self._kept_t[renew] = t
         self._kept_z[renew] = d[renew]
-        self._moving_labels = moving
-        keep = moving | held
+        # Entities of the start count as moving for the tracks on them (carried through a
+        # camera motion, as a moving person's are).
+        self._moving_labels = moving | initial
+        keep = moving | held | initial
         keep[self._track_labels(labels, self._carried_uv)] = True
         keep[0] = False
         fg = np.take(keep, labels) & candidate
@@ -684,6 +705,57 @@ class BackgroundModel:
         self._out = out
         return out
 
+    def _initial_labels(self, d: npt.NDArray[np.float32], labels: npt.NDArray[np.int32],
+                        total: npt.NDArray[np.int64], margin: npt.NDArray[np.float32],
+                        adopt: npt.NDArray[np.bool_], stride: int) -> npt.NDArray[np.bool_]:
+        """Per label, whether it is an entity of the start that stays where it was
+        (``INITIAL_FRACTION`` of its pixels at their marked depth). A marked pixel whose
+        farther reading the background adopted is forgotten: what was there has left."""
+        marked = self._init_z > 0
+        if not marked.any():
+            return np.zeros(len(total), bool)
+        self._init_z[marked & adopt] = 0
+        there = marked & (np.abs(d - self._init_z) <= margin)
+        return _enough(labels, there, total, INITIAL_FRACTION, stride)
+
+    def mark(self, positions: npt.NDArray[np.float64], intrinsics: Intrinsics,
+             stride: int) -> None:
+        """While the background learns after the start or a reset (``background_keep_initial``),
+        mark the components of the last frame holding end-effectors at ``positions`` (N, 3)
+        metres, optical frame: they stay foreground for as long as they stay where they are
+        (:meth:`foreground`). What never moved and holds no end-effector (walls, table tops)
+        is dropped when learning ends; a person present from the start, still or not, is not.
+        The tracker marks through :meth:`protect`; a caller without tracks (the single-frame
+        estimator) calls this with its end-effectors."""
+        if not (self._bg is not None and self._marking and self.learning):
+            return
+        self._hits(positions, intrinsics, stride)
+
+    def _hits(self, positions: npt.NDArray[np.float64], intrinsics: Intrinsics, stride: int
+              ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.int64], npt.NDArray[np.int32]]:
+        """Where ``positions`` project on the strided image (usable ones: ``ok``, their
+        pixels ``uv``) and the component each lies on (``hit``, 0: none); the components hit
+        restart their absorption clock and, while marking, are marked."""
+        labels = self._labels
+        pts = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            u = np.round((intrinsics.fx * pts[:, 0] / pts[:, 2] + intrinsics.cx) / stride)
+            v = np.round((intrinsics.fy * pts[:, 1] / pts[:, 2] + intrinsics.cy) / stride)
+        ok = (pts[:, 2] > 1e-6) & np.isfinite(u) & np.isfinite(v)
+        uv = np.stack([u[ok], v[ok]], axis=1).astype(np.int64)
+        hit = (self._track_labels(labels, uv) if labels is not None
+               else np.zeros(len(uv), np.int32))
+        if hit.any() and labels is not None:
+            # A lookup table per label: faster than np.isin over the whole image.
+            on_track = np.zeros(int(labels.max()) + 1, dtype=bool)
+            on_track[hit[hit > 0]] = True
+            held = np.take(on_track, labels)
+            self._near_since[held] = self._t
+            if self._marking and self.learning and self._last is not None:
+                mark = held & (self._init_z == 0) & (self._last.depth > 0)
+                self._init_z[mark] = self._last.depth[mark]
+        return ok, uv, hit
+
     def _track_labels(self, labels: npt.NDArray[np.int32],
                       uv: npt.NDArray[np.int64]) -> npt.NDArray[np.int32]:
         """Per pixel (u, v) of the strided image, the most frequent label around it (0:
@@ -711,25 +783,12 @@ class BackgroundModel:
         image) the anchor's window falls on the wall behind, which it would keep as an entity
         for as long as the prediction lives. ``stride``: the pixel stride the last frame was
         labelled at."""
-        labels = self._labels
-        if labels is None or self._bg is None:
+        if self._labels is None or self._bg is None:
             return
-        pts = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-        track_ids = np.asarray(ids, dtype=np.int64).reshape(-1)
-        with np.errstate(divide='ignore', invalid='ignore'):
-            u = np.round((intrinsics.fx * pts[:, 0] / pts[:, 2] + intrinsics.cx) / stride)
-            v = np.round((intrinsics.fy * pts[:, 1] / pts[:, 2] + intrinsics.cy) / stride)
-        ok = (pts[:, 2] > 1e-6) & np.isfinite(u) & np.isfinite(v)
-        uv = np.stack([u[ok], v[ok]], axis=1).astype(np.int64)
-        track_ids = track_ids[ok]
+        ok, uv, hit = self._hits(positions, intrinsics, stride)
+        track_ids = np.asarray(ids, dtype=np.int64).reshape(-1)[ok]
         seen = (np.ones(len(ok), bool) if detected is None
                 else np.asarray(detected, dtype=bool).reshape(-1))[ok]
-        hit = self._track_labels(labels, uv)
-        if hit.any():
-            # A lookup table per label: faster than np.isin over the whole image.
-            on_track = np.zeros(int(labels.max()) + 1, dtype=bool)
-            on_track[hit[hit > 0]] = True
-            self._near_since[np.take(on_track, labels)] = self._t
         if not self.learning:
             moving = self._moving_labels
             on_moving = (hit > 0) & (hit < len(moving)) & moving[np.minimum(hit, len(moving) - 1)]

@@ -76,6 +76,13 @@ class EndeffParams:
                           'running and drop the connected parts of the foreground that never '
                           'moved (furniture, walls); off for a camera that moves all the time '
                           'or people who never move.')
+    background_keep_initial: bool = _p(True, 'Static background: what is in view while it '
+                                       'learns (after the start or a reset) and holds an '
+                                       'end-effector stays foreground for as long as it stays '
+                                       'where it was, so a person who is already in view and '
+                                       'keeps still is never hidden; furniture with end-effectors '
+                                       'in view then stays too (false: the background drops it '
+                                       'with what never moved, still people included).')
     background_learn_s: float = _p(0.2, 'Static background: learning time after the start, a '
                                    'reset or a camera motion, during which nothing is removed.',
                                    unit='s', lo=0.0, hi=60.0)

@@ -193,10 +193,12 @@ class Tracker:
         self._frame = 0  # updates since the reset
         self._lost: list[_Lost] = []  # tracks dropped lately
 
-    def reset_background(self) -> None:
+    def reset_background(self, *, empty: bool = False) -> None:
         """Re-learn the static background and fit the floor anew from the next frame (the
-        camera may have been moved on purpose); the tracks are kept."""
-        self.background.reset()
+        camera may have been moved on purpose); the tracks are kept. ``empty``: the room is
+        empty of people now, and all it holds is background
+        (:meth:`~endeff_ros.core.background.BackgroundModel.reset`)."""
+        self.background.reset(empty=empty)
         self._refit_floor()
 
     def _refit_floor(self) -> None:

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from endeff_ros.attributes import ATTRIBUTES_KEY
 from endeff_ros.realdata.labels import Label, LabelError, gt_arrays, make_label, read_labels
@@ -118,13 +119,35 @@ def source_labels(source: Source, frames: list[RealFrame]) -> dict[str, list[Lab
     return out
 
 
+#: Per-copy sensor noise of a still bag: Gaussian depth noise as a fraction of the depth
+#: (a Kinect v1 at 1-3 m reads within about 0.3 %), the fraction of readings dropped at random,
+#: and the colour camera's noise (grey levels).
+STILL_DEPTH_NOISE = 0.003
+STILL_DROPOUTS = 0.01
+STILL_COLOR_NOISE = 2.0
+
+
+def _noisy(depth: npt.NDArray[np.float32], rgb: npt.NDArray[np.uint8],
+           rng: np.random.Generator) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
+    """One copy of a still frame as a sensor reads it again: depth with its per-frame noise
+    and dropouts (NaN), colour with its noise. Nothing in the scene moves."""
+    z = depth * (1.0 + STILL_DEPTH_NOISE * rng.standard_normal(depth.shape)).astype(np.float32)
+    z[rng.random(depth.shape) < STILL_DROPOUTS] = np.nan
+    c = rgb.astype(np.float32) + STILL_COLOR_NOISE * rng.standard_normal(rgb.shape)
+    return z.astype(np.float32), np.clip(np.rint(c), 0, 255).astype(np.uint8)
+
+
 def build_bag(source: Source, out: Path, *, cache: str | Path = DEFAULT_CACHE,
-              storage: str = 'mcap', repeat: int = 1) -> int:
+              storage: str = 'mcap', repeat: int = 1, frame: int | None = None,
+              noise: bool = False, seed: int = 0) -> int:
     """Write ``source`` as one bag at ``out`` (replaced if it exists); returns frames written.
 
     Each frame is written ``repeat`` times in a row (consecutive stamps, the same labels), so
     that the temporal estimator can be scored on a still scene; with ``repeat`` 1 the frames
-    follow each other although they were not recorded consecutively.
+    follow each other although they were not recorded consecutively. ``frame``: only that
+    frame (index in the source's order), so that a bag is one still scene from its first
+    frame on. ``noise``: every copy read again with a sensor's per-frame noise and dropouts
+    (:func:`_noisy`): people who stand still in front of a real sensor, never bit-identical.
     """
     from rosbags.rosbag2 import Writer
 
@@ -137,6 +160,11 @@ def build_bag(source: Source, out: Path, *, cache: str | Path = DEFAULT_CACHE,
         raise ValueError(msg)
     frames = source.frames(cache)
     labels = source_labels(source, frames)
+    if frame is not None:
+        if not 0 <= frame < len(frames):
+            msg = f'{source.name} has frames 0-{len(frames) - 1}, not {frame}'
+            raise ValueError(msg)
+        frames = frames[frame:frame + 1]
     spec = SequenceSpec(source.name, frames=len(frames) * repeat)
     out = Path(out)
     if out.exists():
@@ -144,6 +172,9 @@ def build_bag(source: Source, out: Path, *, cache: str | Path = DEFAULT_CACHE,
     out.parent.mkdir(parents=True, exist_ok=True)
     writer = Writer(out, version=9, storage_plugin=STORAGES[storage])
     attributes = dict(source.attributes, **({'repeat': repeat} if repeat > 1 else {}))
+    if noise:
+        attributes['motion'] = 'still'
+    noise_rng = np.random.default_rng(seed)
     writer.set_custom_data(ATTRIBUTES_KEY, json.dumps(attributes))
     rng = np.random.default_rng(0)
     count = 0
@@ -155,9 +186,10 @@ def build_bag(source: Source, out: Path, *, cache: str | Path = DEFAULT_CACHE,
             gt, ids = gt_arrays(labels.get(frame.name, []))
             for _ in range(repeat):
                 stamp = START_NS + count * PERIOD_NS
+                z, rgb = _noisy(depth, frame.rgb, noise_rng) if noise else (depth, frame.rgb)
                 synth = SynthFrame(index=count, stamp_ns=stamp,
-                                   color_stamp_ns=stamp + COLOR_OFFSET_NS, color=frame.rgb,
-                                   depth=depth, intrinsics=frame.intrinsics, gt=gt, gt_ids=ids,
+                                   color_stamp_ns=stamp + COLOR_OFFSET_NS, color=rgb,
+                                   depth=z, intrinsics=frame.intrinsics, gt=gt, gt_ids=ids,
                                    gt_visible=np.ones(len(ids), bool), frame_id=FRAME_ID)
                 for log, topic, typ, data in frame_messages(synth, spec, rng):
                     if topic not in conns:
@@ -166,6 +198,26 @@ def build_bag(source: Source, out: Path, *, cache: str | Path = DEFAULT_CACHE,
                     writer.write(conns[topic], log, data)
                 count += 1
     return count
+
+
+def build_still_bags(out_dir: str | Path, copies: int, *, names: list[str] | None = None,
+                     cache: str | Path = DEFAULT_CACHE, storage: str = 'mcap') -> list[Path]:
+    """The real frames played still: one bag per labelled frame of each source (``names``,
+    default all), ``<source>_<index>``, that frame ``copies`` times with per-copy sensor
+    noise (:func:`build_bag`'s ``noise``). People in view from the first frame who do not
+    move: what the static background must never hide."""
+    written = []
+    for name in names or list(SOURCES):
+        if name not in SOURCES:
+            msg = f'unknown source {name!r} (have {", ".join(SOURCES)})'
+            raise ValueError(msg)
+        source = SOURCES[name]
+        for i in range(len(source.files)):
+            path = Path(out_dir) / f'{name}_{i:02d}'
+            build_bag(source, path, cache=cache, storage=storage, repeat=copies, frame=i,
+                      noise=True, seed=i)
+            written.append(path)
+    return written
 
 
 def build_bags(out_dir: str | Path, *, names: list[str] | None = None,

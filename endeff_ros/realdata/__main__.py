@@ -3,7 +3,8 @@ frames for labelling, re-lift the labels after a pick was moved.
 
 - ``fetch SOURCE [--from SRC] [--cache DIR]``: copy a source's frames and licence from its
   repository into the cache (see :mod:`endeff_ros.realdata.fetch`);
-- ``build OUT [--sources a,b] [--storage mcap|sqlite3] [--repeat N]``: one bag per source;
+- ``build OUT [--sources a,b] [--storage mcap|sqlite3] [--repeat N | --still N]``: one bag
+  per source, or with ``--still`` one per frame played still with per-copy sensor noise;
 - ``render OUT``: per frame a PNG of the depth (or colour) with a pixel grid (lines every
   20 px, numbered every 100 px) and the labels (circle of radius ``r_px``, id);
 - ``label``: recompute ``depth_m`` and ``xyz`` of every ``labels.yaml`` from its picks.
@@ -20,7 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
-from endeff_ros.realdata import DEFAULT_CACHE, SOURCES, build_bags, source_labels
+from endeff_ros.realdata import (
+    DEFAULT_CACHE,
+    SOURCES,
+    build_bags,
+    build_still_bags,
+    source_labels,
+)
 from endeff_ros.realdata.labels import LabelError, read_labels, write_labels
 from endeff_ros.realdata.sources import SourceError, depth_to_grey
 
@@ -95,6 +102,9 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument('--storage', choices=('mcap', 'sqlite3'), default='mcap')
     b.add_argument('--repeat', type=int, default=1, metavar='N',
                    help='write every frame N times in a row (a still scene; default 1)')
+    b.add_argument('--still', type=int, default=0, metavar='N',
+                   help='one bag per frame, N copies each with per-copy sensor noise: '
+                   'people still from the first frame (default 0: off)')
     r = sub.add_parser('render', help='PNG per frame with pixel grid and labels')
     r.add_argument('out', type=Path)
     la = sub.add_parser('label', help="recompute the labels' depth and xyz from their picks")
@@ -107,8 +117,13 @@ def main(argv: list[str] | None = None) -> int:
             from endeff_ros.realdata.fetch import run
             return run(args.source, args.src, args.cache)
         if args.command == 'build':
-            paths = build_bags(args.out, names=[s for s in args.sources.split(',') if s],
-                               cache=args.cache, storage=args.storage, repeat=args.repeat)
+            names = [s for s in args.sources.split(',') if s]
+            if args.still:
+                paths = build_still_bags(args.out, args.still, names=names, cache=args.cache,
+                                         storage=args.storage)
+            else:
+                paths = build_bags(args.out, names=names, cache=args.cache,
+                                   storage=args.storage, repeat=args.repeat)
         elif args.command == 'render':
             paths = render(args.out, args.cache)
         else:

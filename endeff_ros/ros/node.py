@@ -87,8 +87,11 @@ publishes:
   end_effectors         sensor_msgs/PointCloud2: x y z id entity geodesic confidence state
   end_effectors/markers visualization_msgs/MarkerArray (built only for subscribers)
   debug/bands, debug/image (optional), /diagnostics
-service:
-  ~/reset_background    std_srvs/Trigger: learn the static background again
+services:
+  ~/reset_background          std_srvs/Trigger: learn the static background again
+                              (what is in view and has end-effectors stays: people first)
+  ~/learn_empty_background    std_srvs/Trigger: the room is empty of people now: learn
+                              everything in view as background (a fixed camera's furniture)
 
 ROS arguments follow --ros-args:
   -r __ns:=/camera                    namespace of the topics above
@@ -167,6 +170,8 @@ class EndeffNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.srv_reset_background = self.create_service(Trigger, '~/reset_background',
                                                         self.reset_background)
+        self.srv_learn_empty = self.create_service(Trigger, '~/learn_empty_background',
+                                                   self.learn_empty_background)
         self._worker = threading.Thread(target=self._run, name='endeff_worker', daemon=True)
         self._worker.start()
         self._heard = dict(self.stats.received)
@@ -266,19 +271,30 @@ class EndeffNode(Node):
 
     def reset_background(self, _request: Any, response: Any) -> Any:
         """``~/reset_background`` (std_srvs/Trigger): the static background is re-learnt from
-        the next frame; the tracks are kept. Only sets a flag the worker reads, so it needs
-        no lock."""
+        the next frame; the tracks are kept, and what is in view with end-effectors stays
+        foreground (``background_keep_initial``). Only sets a flag the worker reads, so it
+        needs no lock."""
+        return self._relearn(response, 'reset_background', empty=False)
+
+    def learn_empty_background(self, _request: Any, response: Any) -> Any:
+        """``~/learn_empty_background`` (std_srvs/Trigger): the caller says the room is empty
+        of people now, so everything in view while the background learns is background,
+        furniture with end-effectors included; people who come in later are foreground."""
+        return self._relearn(response, 'learn_empty_background', empty=True)
+
+    def _relearn(self, response: Any, name: str, *, empty: bool) -> Any:
         reset = getattr(self.tracker, 'reset_background', None)
         if reset is None:
             response.success = False
             response.message = 'this tracker has no static background'
             return response
-        reset()
+        reset(empty=empty)
         response.success = True
-        response.message = ('the background is re-learnt from the next frame' if
+        what = 'learnt as the empty room' if empty else 're-learnt'
+        response.message = (f'the background is {what} from the next frame' if
                             self.params.background else 'the background is off (parameter '
                             'background): it will be learnt afresh when turned on')
-        self.get_logger().info(f'reset_background: {response.message}')
+        self.get_logger().info(f'{name}: {response.message}')
         return response
 
     def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:

@@ -1,0 +1,172 @@
+"""The static background never hides a person (core/background.py, ``background_keep_initial``):
+people in view from the first frame who keep still, slowly moving people, people who stand
+still for minutes, and what that costs (a chair in view from the start stays) with the
+empty-room learning that removes it.
+
+The painted scenes of test_background.py. Long runs are played at 5 Hz or 2 Hz (stamps
+0.2 or 0.5 s apart): the background's clocks run on stamps, so two minutes cost 240 frames.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from test_background import (
+    CHAIR_X,
+    CHAIR_Z,
+    FURNITURE_FIRST,
+    PARAMS,
+    PERSON_Z,
+    WALL_Z,
+    add_chair,
+    add_person,
+    points_near,
+    room,
+)
+
+from endeff_ros.core.background import BackgroundModel
+from endeff_ros.core.single_frame import estimate_frame
+from endeff_ros.core.tracker import Tracker
+from endeff_ros.core.types import KINECT_640 as K
+from endeff_ros.core.types import RGBDFrame
+
+SLOW_NS = 200_000_000  # 5 Hz
+MINUTES_NS = 500_000_000  # 2 Hz, for the runs of minutes
+PERSON_X = -0.5
+
+
+def noisy(k: int, depth: np.ndarray, dt_ns: int = SLOW_NS) -> RGBDFrame:
+    """Frame ``k``: a sensor reading the same scene again, 3 mm noise and 1 % dropouts."""
+    rng = np.random.default_rng(1000 + k)
+    z = depth + rng.normal(0.0, 0.003, depth.shape).astype(np.float32)
+    z[rng.random(depth.shape) < 0.01] = np.nan
+    return RGBDFrame(stamp_ns=k * dt_ns, frame_id='camera', depth=z, intrinsics=K)
+
+
+def still_scene(*, chair: bool = False, person: bool = True, x: float = PERSON_X,
+                arm: float = 0.6) -> np.ndarray:
+    depth = room().copy()
+    if chair:
+        add_chair(depth)
+    if person:
+        add_person(depth, x, arm)
+    return depth
+
+
+def on_person(tracks, x: float = PERSON_X) -> set[int]:
+    return {t.id for t in tracks
+            if abs(t.position[0] - x) < 0.8 and abs(t.position[2] - PERSON_Z) < 0.3}
+
+
+def _still_for(params, seconds: float, dt_ns: int) -> tuple[list[int], list[set[int]]]:
+    """A person in view from frame 0 who never moves (only the sensor's noise), for
+    ``seconds``: the person's foreground points and tracks per frame."""
+    tracker = Tracker(params)
+    points, ids = [], []
+    for k in range(int(seconds * 1e9 / dt_ns)):
+        result = tracker.update(noisy(k, still_scene(), dt_ns))
+        points.append(points_near(result.estimate.points, PERSON_X, PERSON_Z))
+        ids.append(on_person(result.tracks))
+    return points, ids
+
+
+def test_a_still_person_in_view_from_the_first_frame_stays_for_two_minutes():
+    points, ids = _still_for(PARAMS, 120.0, MINUTES_NS)
+    assert min(points) > 300  # every frame, learning and after
+    assert all(ids)
+    assert ids[-1] & ids[4]  # the same tracks from the first seconds to the end
+
+
+def test_without_the_rule_the_still_person_is_hidden():
+    """The test above can fail: without the entities of the start, the still person is
+    background once learning ends (PARAMS learns for 0.5 s)."""
+    points, _ = _still_for(FURNITURE_FIRST, 3.0, SLOW_NS)
+    assert points[0] > 300 and max(points[5:]) == 0
+
+
+def test_a_slow_person_present_from_the_start_is_found_as_without_the_background():
+    """Swaying 0.1 m and raising an arm over 20 s (20 times slower than a gesture): found in
+    every frame, as with the background off."""
+    def run(params) -> list[int]:
+        tracker = Tracker(params)
+        found = []
+        for k in range(50):  # 25 s at 2 Hz
+            u = k * MINUTES_NS * 1e-9 / 20.0
+            x = PERSON_X + 0.1 * np.sin(2 * np.pi * u)
+            result = tracker.update(noisy(k, still_scene(x=x, arm=0.5 + 0.5 * np.sin(
+                2 * np.pi * u)), MINUTES_NS))
+            found.append(points_near(result.estimate.points, x, PERSON_Z))
+        return found
+
+    with_bg, without = run(PARAMS), run(PARAMS.replace(background=False))
+    assert min(without) > 300
+    assert min(with_bg) > 300
+
+
+def test_a_person_who_walks_in_and_stands_still_for_minutes_keeps_their_ids():
+    tracker = Tracker(PARAMS)
+    for k in range(40):  # the empty room, then a walk in from the left at 30 Hz
+        depth = room().copy()
+        if k >= 10:
+            add_person(depth, -1.2 + 0.7 * (k - 10) / 30, 0.6)
+        result = tracker.update(noisy(k, depth, dt_ns=33_333_333))
+    t0 = 40 * 33_333_333
+    before = on_person(result.tracks)
+    assert before
+    kept = []
+    for k in range(240):  # two minutes still at 2 Hz (absorb time 1 s)
+        f = noisy(40 + k, still_scene())
+        f = RGBDFrame(stamp_ns=t0 + (k + 1) * MINUTES_NS, frame_id=f.frame_id, depth=f.depth,
+                      intrinsics=K)
+        result = tracker.update(f)
+        kept.append(points_near(result.estimate.points, PERSON_X, PERSON_Z))
+    assert min(kept) > 300
+    assert on_person(result.tracks) & before
+
+
+def test_a_still_person_who_leaves_leaves_nothing_behind():
+    """Still from the first frame, then gone: the place they stood is the wall again, and
+    nothing is kept there as an entity of the start."""
+    tracker = Tracker(PARAMS)
+    for k in range(40):
+        tracker.update(noisy(k, still_scene(person=k < 20)))
+    result = tracker.update(noisy(40, still_scene(person=False)))
+    assert points_near(result.estimate.points, PERSON_X, PERSON_Z) == 0
+    assert not result.tracks
+
+
+def test_a_chair_in_view_from_the_start_stays_and_learning_the_empty_room_removes_it():
+    """People win: the chair's legs are end-effectors while the background learns, so it
+    stays as a person would (the wall, with none, goes). Learning the room while it is empty
+    (``reset(empty=True)``, the ``learn_empty_background`` service) removes it, and a person
+    who then walks in and stands still stays."""
+    tracker = Tracker(PARAMS)
+    for k in range(10):
+        result = tracker.update(noisy(k, still_scene(chair=True, person=False)))
+    assert points_near(result.estimate.points, CHAIR_X, CHAIR_Z) > 50
+    assert np.count_nonzero(result.estimate.points[:, 2] > WALL_Z - 0.1) == 0
+    tracker.background.reset(empty=True)
+    for k in range(10, 20):
+        result = tracker.update(noisy(k, still_scene(chair=True, person=False)))
+    assert points_near(result.estimate.points, CHAIR_X, CHAIR_Z) == 0
+    for k in range(20, 60):  # walks in (5 Hz: 0.14 m a frame), then still for 6 s
+        x = min(-1.2 + 0.14 * (k - 20), PERSON_X)
+        result = tracker.update(noisy(k, still_scene(chair=True, x=x)))
+        assert points_near(result.estimate.points, x, PERSON_Z) > 300
+    assert points_near(result.estimate.points, CHAIR_X, CHAIR_Z) == 0
+
+
+def test_the_single_frame_estimator_marks_with_its_own_end_effectors():
+    """Without a tracker, :meth:`BackgroundModel.mark` with the frame's end-effectors keeps
+    the still person as the tracker's tracks do; unmarked, they are dropped."""
+    def run(mark: bool) -> list[int]:
+        model, found = BackgroundModel(), []
+        for k in range(15):
+            f = noisy(k, still_scene())
+            est = estimate_frame(f, PARAMS, background=model)
+            if mark:
+                model.mark(est.positions(), K, PARAMS.pixel_stride)
+            found.append(points_near(est.points, PERSON_X, PERSON_Z))
+        return found
+
+    assert min(run(True)) > 300
+    assert run(False)[-1] == 0
