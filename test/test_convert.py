@@ -179,24 +179,29 @@ def make_tracks() -> list[Track]:
     return [
         Track(id=3, entity=0, position=np.array([0.1, -0.2, 2.0]), geodesic=0.9,
               confidence=0.75, state=Track.DETECTED, age=4,
-              path=np.array([[0.1, -0.2, 2.0], [0.05, 0.0, 2.1], [0.0, 0.1, 2.2]])),
+              path=np.array([[0.1, -0.2, 2.0], [0.05, 0.0, 2.1], [0.0, 0.1, 2.2]]),
+              velocity=np.array([0.5, -0.25, 0.0]), kind=Track.KIND_HAND),
         Track(id=7, entity=1, position=np.array([-0.5, 0.4, 3.0]), geodesic=1.2,
               confidence=0.25, state=Track.PREDICTED, age=1),
     ]
 
 
 def test_endeff_fields_are_packed():
-    assert convert.ENDEFF_DTYPE.itemsize == 4 * 7 + 1
+    assert convert.ENDEFF_DTYPE.itemsize == 4 * 10 + 2
     names = [f[0] for f in convert.ENDEFF_FIELDS]
-    assert names == ['x', 'y', 'z', 'id', 'entity', 'geodesic', 'confidence', 'state']
-    assert dict((f[0], f[2]) for f in convert.ENDEFF_FIELDS)['state'] == convert.UINT8
+    assert names == ['x', 'y', 'z', 'id', 'entity', 'geodesic', 'confidence', 'vx', 'vy', 'vz',
+                     'state', 'kind']
+    types = dict((f[0], f[2]) for f in convert.ENDEFF_FIELDS)
+    assert types['state'] == types['kind'] == convert.UINT8
+    assert all(offset % 4 == 0 for _, offset, dtype, _ in convert.ENDEFF_FIELDS
+               if dtype != convert.UINT8)
 
 
 def test_tracks_cloud_round_trip(flavour):
     header = convert.make_header(42_000_000_017, 'camera_depth_optical_frame')
     msg = convert.tracks_to_cloud(header, make_tracks())
-    assert msg.height == 1 and msg.width == 2 and msg.point_step == 29
-    assert msg.row_step == 58 and len(msg.data) == 58
+    assert msg.height == 1 and msg.width == 2 and msg.point_step == 42
+    assert msg.row_step == 84 and len(msg.data) == 84
     assert convert.stamp_to_ns(msg.header.stamp) == 42_000_000_017
     assert msg.header.frame_id == 'camera_depth_optical_frame'
     back = convert.cloud_to_array(flavour(msg, CLOUD))
@@ -206,6 +211,9 @@ def test_tracks_cloud_round_trip(flavour):
     np.testing.assert_allclose(convert.xyz(back), [[0.1, -0.2, 2.0], [-0.5, 0.4, 3.0]],
                                rtol=1e-6)
     np.testing.assert_allclose(back['confidence'], [0.75, 0.25])
+    np.testing.assert_allclose(np.stack([back['vx'], back['vy'], back['vz']], axis=1),
+                               [[0.5, -0.25, 0.0], [0.0, 0.0, 0.0]])
+    np.testing.assert_array_equal(back['kind'], [2, 0])
 
 
 def test_empty_cloud(flavour):

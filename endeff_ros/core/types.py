@@ -160,6 +160,8 @@ class Track:
     """A tracked end-effector as published (one row of the ``end_effectors`` cloud).
 
     ``state`` is 0 when a current-frame candidate supports it, 1 when it is predicted only.
+    ``velocity`` (m/s, optical frame) is the track's, zero in its first frame; ``kind`` which
+    part of a person the end is (``KIND_*``; 0: other or not known).
     """
 
     id: int
@@ -170,6 +172,12 @@ class Track:
     state: int
     age: int
     path: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    velocity: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    kind: int = 0
 
     DETECTED = 0
     PREDICTED = 1
+    KIND_OTHER = 0
+    KIND_HEAD = 1
+    KIND_HAND = 2
+    KIND_FOOT = 3

@@ -41,10 +41,13 @@ _POINTFIELD_TO_NUMPY: dict[int, str] = {
     FLOAT32: 'f4', FLOAT64: 'f8'}
 _NUMPY_TO_POINTFIELD: dict[str, int] = {v: k for k, v in _POINTFIELD_TO_NUMPY.items()}
 
-#: One row of the ``end_effectors`` cloud (packed; ``point_step`` = ``ENDEFF_DTYPE.itemsize``).
+#: One row of the ``end_effectors`` cloud (packed; ``point_step`` = ``ENDEFF_DTYPE.itemsize``,
+#: 42 bytes). Every 4-byte field lies at a multiple of 4, the two bytes last, so a consumer
+#: that reads fields by offset reads aligned floats. docs/output.md is the contract.
 ENDEFF_DTYPE = np.dtype([
     ('x', '<f4'), ('y', '<f4'), ('z', '<f4'), ('id', '<u4'), ('entity', '<u4'),
-    ('geodesic', '<f4'), ('confidence', '<f4'), ('state', 'u1')])
+    ('geodesic', '<f4'), ('confidence', '<f4'), ('vx', '<f4'), ('vy', '<f4'), ('vz', '<f4'),
+    ('state', 'u1'), ('kind', 'u1')])
 
 #: (name, offset, PointField datatype, count) of :data:`ENDEFF_DTYPE`.
 ENDEFF_FIELDS: tuple[tuple[str, int, int, int], ...] = tuple(
@@ -311,8 +314,9 @@ def tracks_to_array(tracks: Sequence[Track]) -> npt.NDArray[Any]:
     out = np.zeros(len(tracks), dtype=ENDEFF_DTYPE)
     for i, t in enumerate(tracks):
         p = np.asarray(t.position, dtype=np.float64).reshape(3)
+        v = np.asarray(t.velocity, dtype=np.float64).reshape(3)
         out[i] = (p[0], p[1], p[2], int(t.id), int(t.entity), float(t.geodesic),
-                  float(t.confidence), int(t.state))
+                  float(t.confidence), v[0], v[1], v[2], int(t.state), int(t.kind))
     return out
 
 
