@@ -169,6 +169,11 @@ class EndeffParams:
                              'cuts the body, not an end.')
     cut_margin_px: int = _p(3, 'How close (pixels) to the image border a sub-band counts as '
                             'cut by it.', unit='px', lo=0, hi=100)
+    cut_dead_margins: bool = _p(True, 'Count the edge of the dead margins of registered depth '
+                                '(bands or corners along the border where the sensor never '
+                                'reads, learnt from the stream) as the image border for cut '
+                                'ends; an edge that is no straight line along a side is the '
+                                "scene's, not a margin.")
     tip_depth: float = _p(0.14, 'Geodesic depth of the terminal part behind its extreme: '
                           'its points give the part radius, axis and centre.', unit='m',
                           lo=0.0, hi=1.0)

@@ -22,6 +22,7 @@ from .cloud import foreground_cloud
 from .floor import FloorPlane
 from .graph import TopologyGraph, approximate_geodesic, build_graph, find_end_effectors, geodesic
 from .params import EndeffParams
+from .readable import Edges, ReadableArea, fit_edges, strided_read
 from .types import Candidate, Intrinsics, RGBDFrame
 
 if TYPE_CHECKING:
@@ -74,12 +75,15 @@ class FrameEstimate:
 
 def estimate_frame(frame: RGBDFrame, params: EndeffParams | None = None, *,
                    floor: FloorPlane | None = None,
-                   background: BackgroundModel | None = None) -> FrameEstimate:
+                   background: BackgroundModel | None = None,
+                   readable: ReadableArea | None = None) -> FrameEstimate:
     """Run Sections 3-4 on one frame: foreground cloud, bands, graph, candidates.
 
     ``floor`` may give a known floor plane (the tracker passes the previous frame's);
     ``background`` a static-background model that learns from the frame and removes what
-    never moved (:mod:`.background`).
+    never moved (:mod:`.background`); ``readable`` the stream's readable area
+    (:mod:`.readable`), whose dead margins cut ends as the image border does (without it, the
+    frame's own readings tell where the margins are).
     Raises :class:`~endeff_ros.core.errors.InputError` for unusable frames; an empty
     foreground is not an error (the estimate simply has no entities).
     """
@@ -92,25 +96,35 @@ def estimate_frame(frame: RGBDFrame, params: EndeffParams | None = None, *,
     estimate = estimate_points(cloud.points, params, colors=cloud.colors, timer=timer)
     estimate = dataclasses.replace(estimate, floor=cloud.floor, cut=cloud.cut)
     if params.drop_cut_ends:
-        estimate = drop_cut_ends(estimate, frame.intrinsics, params)
+        edges = None
+        if params.cut_dead_margins:
+            edges = (readable.update(frame.depth, params.pixel_stride, params.cut_margin_px)
+                     if readable is not None else
+                     fit_edges(strided_read(frame.depth, params.pixel_stride),
+                               params.pixel_stride, params.cut_margin_px))
+        estimate = drop_cut_ends(estimate, frame.intrinsics, params, edges)
     return estimate
 
 
 def cut_nodes(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
               intrinsics: Intrinsics, params: EndeffParams,
-              cut: npt.NDArray[np.bool_] | None = None) -> npt.NDArray[np.intp]:
+              cut: npt.NDArray[np.bool_] | None = None,
+              edges: Edges | None = None) -> npt.NDArray[np.intp]:
     """Sub-bands (graph nodes) cut by the view or by the foreground box: those with a point
     projecting within ``cut_margin_px`` of the image border, or lying within one voxel of a
     face of the box, or marked in ``cut`` (N,) (beside a dropped table top:
     :attr:`~.cloud.ForegroundCloud.cut`). A body that leaves the image (or the box, or goes
     behind a table) ends there, so its farthest sub-band is an extreme of the graph although
-    it is no end of the body."""
+    it is no end of the body. ``edges``: the readable area's edges (dead margins of registered
+    depth, :mod:`.readable`), which count as the image border."""
     z = np.maximum(points[:, 2], 1e-6)
     u = intrinsics.fx * points[:, 0] / z + intrinsics.cx
     v = intrinsics.fy * points[:, 1] / z + intrinsics.cy
     m = params.cut_margin_px
     near = ((u < m) | (u > intrinsics.width - 1 - m) | (v < m)
             | (v > intrinsics.height - 1 - m))
+    if edges is not None:
+        near |= edges.near(u, v, m)
     s = max(params.voxel_size, 0.01)
     for k, axis in enumerate('xyz'):
         lo, hi = getattr(params, f'box_min_{axis}'), getattr(params, f'box_max_{axis}')
@@ -121,10 +135,11 @@ def cut_nodes(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
 
 
 def drop_cut_ends(estimate: FrameEstimate, intrinsics: Intrinsics,
-                  params: EndeffParams) -> FrameEstimate:
+                  params: EndeffParams, edges: Edges | None = None) -> FrameEstimate:
     """``estimate`` without the candidates whose sub-band is cut (:func:`cut_nodes`, with
-    the points its ``cut`` marks)."""
-    cut = cut_nodes(estimate.points, estimate.subband, intrinsics, params, estimate.cut)
+    the points its ``cut`` marks and the readable area's ``edges``)."""
+    cut = cut_nodes(estimate.points, estimate.subband, intrinsics, params, estimate.cut,
+                    edges)
     if not cut.size or not any(e.candidates for e in estimate.entities):
         return estimate
     def is_cut(c: Candidate) -> bool:  # its node, or the sliver it was moved back from

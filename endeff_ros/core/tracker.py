@@ -61,6 +61,7 @@ from .graph import (
 )
 from .nearest import nearest_point
 from .params import EndeffParams
+from .readable import ReadableArea
 from .single_frame import FrameEstimate, estimate_frame
 from .types import Candidate, Intrinsics, RGBDFrame, Track
 
@@ -174,6 +175,7 @@ class Tracker:
         self.params = params or EndeffParams()
         self._flow: FlowEstimator | None = None
         self.background = BackgroundModel()
+        self.readable = ReadableArea()
         self.reset(forget_ids=True)
 
     def reset(self, *, forget_ids: bool = False) -> None:
@@ -185,6 +187,7 @@ class Tracker:
         self._tracks: list[_TrackState] = []
         if forget_ids:
             self.background = BackgroundModel()
+            self.readable = ReadableArea()
         if forget_ids or not hasattr(self, '_next_id'):
             self._next_id = 0
         self._prev: RGBDFrame | None = None
@@ -220,7 +223,8 @@ class Tracker:
         if not self.params.background:
             self.background.reset()  # learnt afresh if it is turned on again
         return estimate_frame(frame, self.params, floor=self._floor,
-                              background=self.background if self.params.background else None)
+                              background=self.background if self.params.background else None,
+                              readable=self.readable)
 
     @property
     def estimate_wants_color(self) -> bool:
