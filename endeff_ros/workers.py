@@ -148,7 +148,15 @@ class _Worker:
         parent_conn, child_conn = ctx.Pipe()
         proc = ctx.Process(target=_worker_main, name='endeff-worker', daemon=True,
                            args=(child_conn, os.getpid(), initializer, initargs))
-        proc.start()
+        # The new interpreter inherits SIGINT ignored, so a Ctrl-C to the process group while
+        # it is still importing (before _worker_main ignores it) prints no traceback there.
+        main_thread = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
+        try:
+            proc.start()
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGINT, previous)
         child_conn.close()
         return cls(proc, parent_conn)
 

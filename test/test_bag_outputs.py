@@ -249,6 +249,15 @@ def _running(pid: int) -> bool:
         return False
 
 
+def _all_ended(pids: list[int], within_s: float = 5.0) -> bool:
+    """Whether every process of ``pids`` has ended within ``within_s`` (the spawned workers'
+    resource tracker ends a moment after the parent)."""
+    deadline = time.monotonic() + within_s
+    while any(_running(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return not any(_running(p) for p in pids)
+
+
 def _started_with_workers(tmp_path: Path, command: str, args: list[str],
                           **popen: Any) -> tuple[subprocess.Popen[str], list[int]]:
     """``endeff COMMAND`` on three slow bags with ``--jobs 2`` (and ``args``), once its two
@@ -294,7 +303,7 @@ def test_sigterm_to_eval_stops_its_workers(tmp_path: Path) -> None:
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, err
     assert 'interrupted' in err and 'Traceback' not in err, err
-    assert not [pid for pid in workers if _running(pid)]
+    assert _all_ended(workers)
 
 
 def test_sigkill_leftover_is_removed_by_the_next_run(tmp_path: Path,
