@@ -72,6 +72,8 @@ from endeff_ros.scoring import (
     seen_labels,
     summary_dict,
 )
+from endeff_ros.tracking_metrics import TrackingScorer, tracking_group, tracking_json
+from endeff_ros.tracking_metrics import format_tables as tracking_tables
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
@@ -168,6 +170,8 @@ class SequenceResult:
     #: 3): a label outside it cannot be found, whatever the estimators do.
     gt_points: int = 0
     gt_in_box: int = 0
+    #: Time consistency of the temporal estimator's ids and positions.
+    tracking: TrackingScorer = field(default_factory=TrackingScorer)
 
     @property
     def frames(self) -> int:
@@ -206,6 +210,7 @@ class SequenceResult:
         out['labels_seen'] = _seen_json(self.gt_points,
                                         self.scorers['temporal'].seen_points,
                                         {m: self.scorers[m].seen_recall for m in METHODS})
+        out['tracking'] = tracking_json(self.tracking)
         out['estimator_input_errors'] = dict(self.input_errors)
         out['seconds'] = {k: round(v, 4) for k, v in self.seconds.items()}
         out['read_stats'] = self.stats
@@ -310,6 +315,8 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
                     res.false_positives[m].append(score.fp)
                     if m == 'temporal':
                         res.predicted_false_positives += _predicted_unmatched(tracks, score)
+                        res.tracking.add_tracks(frame.stamp_ns, gt, ids_by_stamp.get(
+                            frame.stamp_ns), kinds, tracks, score, frame=res.frames)
             if gt is not None:
                 res.stamps_ns.append(frame.stamp_ns)
                 labels = np.asarray(gt, dtype=np.float64).reshape(-1, 3)
@@ -390,6 +397,7 @@ def _group_entry(inside: Sequence[SequenceResult], attribute: str | None) -> dic
     entry['labels_seen'] = _seen_json(
         sum(r.gt_points for r in inside), sum(r.scorers['temporal'].seen_points for r in inside),
         {m: nanmean(r.scorers[m].seen_recall for r in inside) for m in METHODS})
+    entry['tracking'] = tracking_group([r.tracking for r in inside])
     return entry
 
 
@@ -404,6 +412,7 @@ def build_report(results: Sequence[SequenceResult], failed: Sequence[tuple[str, 
     whole = _group_entry(results, None)
     report['kinds'] = whole['kinds']
     report['labels_seen'] = whole['labels_seen']
+    report['tracking'] = whole['tracking']
     report['labels_in_box'] = _in_box_json(sum(r.gt_points for r in results),
                                            sum(r.gt_in_box for r in results))
     groups = {}
@@ -487,6 +496,9 @@ def format_table(report: dict[str, Any], *, failed: bool = True) -> str:
     kinds = _kind_table(report, width)
     if kinds:
         lines += ['', *kinds]
+    tracking = tracking_tables(report, width)
+    if tracking:
+        lines += ['', *tracking]
     for f in report.get('failed', []) if failed else []:
         lines.append(f'FAILED {f["bag"]}: {f["error"]}')
     return '\n'.join(line.rstrip() for line in lines)
