@@ -288,7 +288,8 @@ def test_markers_match_cloud():
     np.testing.assert_allclose(pos, convert.xyz(cloud), atol=1e-6)
     labels = [m for m in markers if m.ns == convert.NS_LABEL]
     assert [m.type for m in labels] == [Marker.TEXT_VIEW_FACING] * 2
-    assert labels[0].text.startswith('3') and 'predicted' in labels[1].text
+    # The kind first, then the id; a prediction says so.
+    assert [m.text for m in labels] == ['hand 3', 'other 7 (predicted)']
     paths = [m for m in markers if m.ns == convert.NS_PATH]
     assert len(paths) == 1 and paths[0].type == Marker.LINE_STRIP and len(paths[0].points) == 3
     roots = [m for m in markers if m.ns == convert.NS_ROOT]

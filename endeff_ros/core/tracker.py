@@ -59,6 +59,7 @@ from .graph import (
     distance_to_path,
     path_to_sources,
 )
+from .kinds import KindLabeller
 from .nearest import nearest_point
 from .params import EndeffParams
 from .readable import ReadableArea
@@ -176,6 +177,7 @@ class Tracker:
         self._flow: FlowEstimator | None = None
         self.background = BackgroundModel()
         self.readable = ReadableArea()
+        self.kinds = KindLabeller()  # head, hand, foot or other per track (Track.kind)
         self.reset(forget_ids=True)
 
     def reset(self, *, forget_ids: bool = False) -> None:
@@ -273,7 +275,8 @@ class Tracker:
             self.background.protect(self._anchors(), [t.id for t in self._tracks],
                                     frame.intrinsics, self.params.pixel_stride,
                                     detected=[t.detected for t in self._tracks])
-        tracks = [self._publish(t) for t in self._tracks]
+        tracks = self.kinds.label([self._publish(t) for t in self._tracks], estimate,
+                                  frame.intrinsics)
         return TrackerResult(frame.stamp_ns, frame.frame_id, tracks, estimate, stages)
 
     # -- predict (Section 5.1) ---------------------------------------------------------------

@@ -22,7 +22,8 @@ import numpy as np
 
 from endeff_ros import image_codecs
 from endeff_ros.core.errors import InputError
-from endeff_ros.core.types import Intrinsics, RGBDFrame
+from endeff_ros.core.kinds import kind_name
+from endeff_ros.core.types import Intrinsics, RGBDFrame, Track
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -31,7 +32,6 @@ if TYPE_CHECKING:
 
     from endeff_ros.core.single_frame import FrameEstimate
     from endeff_ros.core.tracker import TrackerResult
-    from endeff_ros.core.types import Track
 
 # sensor_msgs/PointField datatypes
 INT8, UINT8, INT16, UINT16, INT32, UINT32, FLOAT32, FLOAT64 = range(1, 9)
@@ -357,14 +357,24 @@ def _point(p: npt.ArrayLike) -> Any:
 NS_EFFECTOR, NS_LABEL, NS_PATH, NS_ROOT = 'end_effectors', 'labels', 'paths', 'roots'
 
 
+def marker_label(track: Track) -> str:
+    """A track's marker text: its kind and id (``hand 7``, ``other 3`` for an end that is no
+    known part of a person), `` (predicted)`` appended while no detection supports it. The
+    kind comes first because it is what a person watching RViz looks for; the id tells two
+    hands apart and follows one over time."""
+    text = f'{kind_name(int(getattr(track, "kind", 0)))} {int(track.id)}'
+    return text if int(track.state) == Track.DETECTED else f'{text} (predicted)'
+
+
 def result_to_markers(header: Any, result: TrackerResult, lifetime_s: float = 0.2) -> Any:
     """``end_effectors/markers``: DELETEALL, then per track a sphere, a label and its path.
 
     Each track gets a SPHERE (namespace ``end_effectors``, marker id = track id), a
-    TEXT_VIEW_FACING label ``id (state)`` and a LINE_STRIP through ``track.path`` (sub-band
-    centroids to the root); each entity gets a root sphere. Every marker carries ``header`` and
-    a ``lifetime_s`` lifetime so that stale markers vanish when the node stops. ``result`` needs
-    ``tracks`` and ``estimate`` (which may be None: no root markers).
+    TEXT_VIEW_FACING label (:func:`marker_label`: ``hand 7``) and a LINE_STRIP through
+    ``track.path`` (sub-band centroids to the root); each entity gets a root sphere. Every
+    marker carries ``header`` and a ``lifetime_s`` lifetime so that stale markers vanish when
+    the node stops. ``result`` needs ``tracks`` and ``estimate`` (which may be None: no root
+    markers).
     """
     from visualization_msgs.msg import Marker, MarkerArray
 
@@ -400,7 +410,7 @@ def result_to_markers(header: Any, result: TrackerResult, lifetime_s: float = 0.
                                      np.array([0.0, -0.08, 0.0]))
         label.scale.z = 0.06
         label.color = _color(np.array([255, 255, 255], np.uint8))
-        label.text = f'{t.id} ({"detected" if t.state == 0 else "predicted"})'
+        label.text = marker_label(t)
         out.markers.append(label)
         path = np.asarray(t.path, dtype=np.float64).reshape(-1, 3)
         if path.shape[0] >= 2:
@@ -451,7 +461,8 @@ def depth_to_rgb(depth: npt.NDArray[np.float32], max_m: float = 5.0) -> npt.NDAr
 
 def draw_tracks(color_rgb: npt.NDArray[np.uint8], intrinsics: Intrinsics,
                 tracks: Sequence[Track]) -> npt.NDArray[np.uint8]:
-    """Copy of ``color_rgb`` (H, W, 3) with each track's path, position and id drawn on it."""
+    """Copy of ``color_rgb`` (H, W, 3) with each track's path, position, kind and id drawn on
+    it (``hand 7``, as the markers' labels)."""
     import cv2
 
     img = np.ascontiguousarray(color_rgb, dtype=np.uint8).copy()
@@ -467,8 +478,11 @@ def draw_tracks(color_rgb: npt.NDArray[np.uint8], intrinsics: Intrinsics,
             continue
         u, v = (int(round(c)) for c in intrinsics.project(p)[0])
         cv2.circle(img, (u, v), 6, rgb, -1 if t.state == 0 else 2, cv2.LINE_AA)
-        cv2.putText(img, str(t.id), (u + 8, v - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.5, rgb, 1,
-                    cv2.LINE_AA)
+        # The marker's label less its state, which the filled or hollow circle shows.
+        text = f'{kind_name(int(getattr(t, "kind", 0)))} {int(t.id)}'
+        for colour, thick in (((0, 0, 0), 3), (rgb, 1)):  # outlined: legible on any colour
+            cv2.putText(img, text, (u + 8, v - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.5, colour,
+                        thick, cv2.LINE_AA)
     return img
 
 

@@ -1,0 +1,205 @@
+"""Head, hand, foot or other (``Track.kind``): the rules of core/kinds.py and their memory."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from endeff_ros.core.kinds import (
+    EntityShape,
+    KindLabeller,
+    entity_shapes,
+    frame_kinds,
+    kind_name,
+)
+from endeff_ros.core.types import Track
+
+UP = np.array([0.0, -1.0, 0.0])  # the camera level: up is -y
+FLOOR = 1.1  # camera 1.1 m above the floor: height = -y + 1.1
+HEAD, HAND, FOOT, OTHER = Track.KIND_HEAD, Track.KIND_HAND, Track.KIND_FOOT, Track.KIND_OTHER
+
+
+def _at(x: float, h: float, z: float = 3.0) -> list[float]:
+    """A point ``h`` m above the floor, ``x`` m to the right, ``z`` m ahead."""
+    return [x, FLOOR - h, z]
+
+
+def _kinds(ends: list[tuple[list[float], float]], shape: EntityShape) -> list[int]:
+    pos = np.array([p for p, _ in ends])
+    geo = np.array([g for _, g in ends])
+    return frame_kinds(pos, geo, np.zeros(len(ends), dtype=np.intp), {0: shape}, UP,
+                       FLOOR).tolist()
+
+
+STANDING = EntityShape(root_height=1.0, bottom=0.02, top=1.75, on_floor=True)
+
+
+def test_a_standing_person_has_a_head_two_hands_and_two_feet():
+    ends = [(_at(0.0, 1.6), 0.6), (_at(-0.6, 1.0), 0.85), (_at(0.6, 1.1), 0.85),
+            (_at(-0.15, 0.08), 1.0), (_at(0.15, 0.08), 1.0)]
+    assert _kinds(ends, STANDING) == [HEAD, HAND, HAND, FOOT, FOOT]
+
+
+def test_a_hand_raised_above_the_head_is_no_head():
+    """The raised hand is the highest end, but it came up the arm: its geodesic length is
+    much more than its rise, the head's about equal to it."""
+    ends = [(_at(0.35, 2.0), 1.25), (_at(0.0, 1.6), 0.62), (_at(-0.3, 0.9), 0.8),
+            (_at(-0.15, 0.08), 1.0), (_at(0.15, 0.08), 1.0)]
+    assert _kinds(ends, STANDING) == [HAND, HEAD, HAND, FOOT, FOOT]
+
+
+def test_a_chair_a_floating_star_and_a_robot_arm_are_other():
+    chair = EntityShape(root_height=0.45, bottom=0.0, top=0.96, on_floor=True)
+    legs = [(_at(x, 0.03, z), 0.5) for x in (-0.2, 0.2) for z in (2.8, 3.2)]
+    back = [(_at(x, 0.96, 3.2), 0.6) for x in (-0.23, 0.23)]
+    assert _kinds(legs + back, chair) == [OTHER] * 6
+    star = EntityShape(root_height=1.15, bottom=0.55, top=1.75, on_floor=True)
+    arms = [(_at(0.6 * np.cos(a), 1.15 + 0.6 * np.sin(a)), 0.55)
+            for a in np.pi / 2 + 2 * np.pi * np.arange(5) / 5]
+    assert _kinds(arms, star) == [OTHER] * 5
+    arm = EntityShape(root_height=0.6, bottom=0.0, top=1.35, on_floor=True)
+    assert _kinds([(_at(0.4, 1.3), 1.0), (_at(0.0, 0.03), 0.6)], arm) == [OTHER] * 2
+
+
+def test_a_person_cut_at_the_waist_by_the_image_has_a_head_and_hands():
+    """Close to the camera the image's lower border cuts the body: what is in view rests on
+    nothing (its lowest points 0.6 m above the floor, as a star's), yet the upper body test
+    holds; no end is a foot. The same shape not cut by the border floats: other."""
+    close = EntityShape(root_height=1.05, bottom=0.6, top=1.75, on_floor=True, cut=True)
+    ends = [(_at(0.0, 1.65, 1.3), 0.62), (_at(-0.35, 1.0, 1.0), 0.7),
+            (_at(0.3, 0.7, 1.0), 0.75)]
+    assert _kinds(ends, close) == [HEAD, HAND, HAND]
+    assert _kinds(ends, close._replace(cut=False)) == [OTHER] * 3
+
+
+def test_legs_below_an_image_cutting_off_the_head_are_feet():
+    legs = EntityShape(root_height=0.9, bottom=0.02, top=1.0, on_floor=True, cut_top=True)
+    ends = [(_at(-0.15, 0.08), 1.0), (_at(0.15, 0.08), 1.0)]
+    assert _kinds(ends, legs) == [FOOT, FOOT]
+    assert _kinds(ends, legs._replace(cut_top=False)) == [OTHER] * 2  # two ends: too few
+
+
+def test_an_end_of_an_unknown_entity_gets_no_vote():
+    pos = np.array([_at(0.0, 1.6)])
+    assert frame_kinds(pos, np.array([0.6]), np.array([3]), {0: STANDING}, UP,
+                       FLOOR).tolist() == [-1]
+
+
+def _labeller() -> KindLabeller:
+    from endeff_ros.core.floor import FloorPlane
+
+    labeller = KindLabeller()
+    labeller.see_floor(FloorPlane(UP, FLOOR))
+    return labeller
+
+
+def _track(tid: int, position: list[float], geodesic: float, age: int) -> Track:
+    return Track(id=tid, entity=0, position=np.array(position), geodesic=geodesic,
+                 confidence=1.0, state=Track.DETECTED, age=age)
+
+
+def _person(frame: int, right_foot_height: float = 0.08) -> list[Track]:
+    return [_track(1, _at(0.0, 1.6), 0.6, frame), _track(2, _at(-0.6, 1.0), 0.85, frame),
+            _track(3, _at(0.6, 1.1), 0.85, frame), _track(4, _at(-0.15, 0.08), 1.0, frame),
+            _track(5, _at(0.15, right_foot_height), 1.0, frame)]
+
+
+def test_a_foot_raised_for_a_moment_stays_a_foot_raised_for_long_becomes_a_hand():
+    labeller = _labeller()
+    for frame in range(1, 31):  # a second of standing
+        out = labeller.label_shapes(_person(frame), {0: STANDING})
+    assert [t.kind for t in out] == [HEAD, HAND, HAND, FOOT, FOOT]
+    for frame in range(31, 36):  # a kick: the right foot 0.9 m up for 5 frames
+        out = labeller.label_shapes(_person(frame, 0.9), {0: STANDING})
+        assert out[4].kind == FOOT
+    for frame in range(36, 96):  # held up for two seconds
+        out = labeller.label_shapes(_person(frame, 0.9), {0: STANDING})
+    assert out[4].kind == HAND
+
+
+def test_a_person_who_lies_down_keeps_being_a_person_and_a_new_id_starts_afresh():
+    labeller = _labeller()
+    for frame in range(1, 31):
+        labeller.label_shapes(_person(frame), {0: STANDING})
+    lying = EntityShape(root_height=0.15, bottom=0.0, top=0.35, on_floor=True)
+    ends = [_track(1, _at(0.9, 0.12), 0.6, 31), _track(2, _at(0.5, 0.3), 0.8, 31),
+            _track(4, _at(-0.9, 0.1), 1.0, 31)]
+    out = labeller.label_shapes(ends, {0: lying})
+    assert [t.kind for t in out] == [HEAD, HAND, FOOT]  # the votes of the standing frames
+    # Id 1 given to a new track (age 1): its history is not the old head's.
+    fresh = [_track(1, _at(0.9, 0.12), 0.6, 1)]
+    assert labeller.label_shapes(fresh, {0: lying})[0].kind == OTHER
+    # Nor does anything stick to an entity never person-like.
+    other = _labeller()
+    for frame in range(1, 31):
+        out = other.label_shapes([_track(9, _at(0.0, 0.1), 0.5, frame)], {0: lying})
+    assert out[0].kind == OTHER
+
+
+def test_entity_shapes_measure_heights_above_the_floor_and_the_cut():
+    from endeff_ros.core.floor import FloorPlane
+    from endeff_ros.core.single_frame import EntityEstimate, FrameEstimate
+    from endeff_ros.core.types import KINECT_640
+
+    rng = np.random.default_rng(0)
+    h = rng.uniform(0.0, 1.8, 500)
+    pts = np.stack([rng.uniform(-0.2, 0.2, 500), FLOOR - h, np.full(500, 3.0)], axis=1)
+    ent = EntityEstimate(0, np.array(_at(0.0, 1.0)), [], None, np.arange(500))
+    est = FrameEstimate(points=pts, band=np.zeros(500, int), subband=np.zeros(500, int),
+                        entity=np.zeros(500, int), entities=[ent], unreachable=0,
+                        floor=FloorPlane(UP, FLOOR))
+    shape = entity_shapes(est, UP, FLOOR, KINECT_640)[0]
+    assert shape.root_height == pytest.approx(1.0)
+    assert shape.bottom == pytest.approx(0.0, abs=0.05)
+    assert shape.top == pytest.approx(1.8, abs=0.05)
+    assert shape.on_floor and not shape.cut  # the feet, 3 m ahead, are well inside the image
+    near = est.points.copy()
+    near[:, 2] = 1.2  # the same body at 1.2 m: its lower half is below the image
+    shape = entity_shapes(FrameEstimate(points=near, band=est.band, subband=est.subband,
+                                        entity=est.entity, entities=[ent], unreachable=0),
+                          UP, FLOOR, KINECT_640)[0]
+    assert shape.cut
+
+
+def test_kind_names():
+    assert [kind_name(k) for k in (0, 1, 2, 3, 7)] == ['other', 'head', 'hand', 'foot', 'other']
+
+
+def _synthetic_kinds(sequence: str) -> tuple[int, int, int]:
+    """(matched ends, of the right kind, of kind other) of the tracker over a quick render
+    of a paper-suite sequence, ends matched to the labels within 0.15 m."""
+    from endeff_ros.core.tracker import Tracker
+    from endeff_ros.core.types import KINECT_640, RGBDFrame
+    from endeff_ros.evaluate import is_person_sequence
+    from endeff_ros.scoring import kinds_of_ids, score_frame
+    from endeff_ros.synth.frames import render_sequence
+
+    person = is_person_sequence(sequence, {})
+    tracker = Tracker()
+    matched = right = other = 0
+    for f in render_sequence(sequence, quick=True):
+        if f.depth is None:
+            continue
+        result = tracker.update(RGBDFrame(f.stamp_ns, 'camera', f.depth, KINECT_640, f.color))
+        truth = kinds_of_ids(f.gt_ids, person=person)
+        score = score_frame(result.positions(), f.gt)
+        names = ['other', 'head', 'hand', 'foot']
+        for est, gt in score.matches:
+            matched += 1
+            right += names[result.tracks[est].kind] == truth[gt]
+        other += sum(t.kind == OTHER for t in result.tracks)
+    return matched, right, other
+
+
+@pytest.mark.parametrize('sequence', ['two_people', 'jumping_jacks'])
+def test_tracked_people_get_their_kinds(sequence):
+    matched, right, _ = _synthetic_kinds(sequence)
+    assert matched >= 20
+    assert right >= 0.9 * matched
+
+
+@pytest.mark.parametrize('sequence', ['chair', 'robot_arm', 'star'])
+def test_tracked_generic_entities_are_other(sequence):
+    matched, right, _ = _synthetic_kinds(sequence)
+    assert matched >= 5
+    assert right >= 0.95 * matched
