@@ -59,6 +59,7 @@ from endeff_ros.core.cloud import box_mask
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.types import Track
+from endeff_ros.kind_eval import KindConfusion, confusion_group, confusion_table
 from endeff_ros.scoring import (
     KINDS,
     MATCH_THRESHOLD_M,
@@ -170,6 +171,8 @@ class SequenceResult:
     #: 3): a label outside it cannot be found, whatever the estimators do.
     gt_points: int = 0
     gt_in_box: int = 0
+    #: The temporal estimator's published kinds against the matched labels' kinds.
+    kind_confusion: KindConfusion = field(default_factory=KindConfusion)
     #: Time consistency of the temporal estimator's ids and positions.
     tracking: TrackingScorer = field(default_factory=TrackingScorer)
 
@@ -204,6 +207,7 @@ class SequenceResult:
             out['attribute_warning'] = self.attribute_warning
         out['kinds'] = {m: {k: v.to_json() for k, v in self.kind_scores(m).items()}
                         for m in METHODS}
+        out['kind_confusion'] = self.kind_confusion.to_json()
         out['counts'] = {m: summary_dict(self.scorers[m]) for m in METHODS}
         out['counts']['temporal']['predicted_false_positives'] = self.predicted_false_positives
         out['labels_in_box'] = _in_box_json(self.gt_points, self.gt_in_box)
@@ -315,6 +319,7 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
                     res.false_positives[m].append(score.fp)
                     if m == 'temporal':
                         res.predicted_false_positives += _predicted_unmatched(tracks, score)
+                        res.kind_confusion.add(tracks, kinds, score)
                         res.tracking.add_tracks(frame.stamp_ns, gt, ids_by_stamp.get(
                             frame.stamp_ns), kinds, tracks, score, frame=res.frames)
             if gt is not None:
@@ -394,6 +399,7 @@ def _group_entry(inside: Sequence[SequenceResult], attribute: str | None) -> dic
         entry[m] = mean_over_sequences([r.score(m) for r in inside]).to_json()
     entry['kinds'] = {m: {k: v.to_json() for k, v in mean_kinds_over_sequences(
         [r.kind_scores(m) for r in inside]).items()} for m in METHODS}
+    entry['kind_confusion'] = confusion_group([r.kind_confusion for r in inside])
     entry['labels_seen'] = _seen_json(
         sum(r.gt_points for r in inside), sum(r.scorers['temporal'].seen_points for r in inside),
         {m: nanmean(r.scorers[m].seen_recall for r in inside) for m in METHODS})
@@ -411,6 +417,7 @@ def build_report(results: Sequence[SequenceResult], failed: Sequence[tuple[str, 
                          for m in METHODS}
     whole = _group_entry(results, None)
     report['kinds'] = whole['kinds']
+    report['kind_confusion'] = whole['kind_confusion']
     report['labels_seen'] = whole['labels_seen']
     report['tracking'] = whole['tracking']
     report['labels_in_box'] = _in_box_json(sum(r.gt_points for r in results),
@@ -496,6 +503,9 @@ def format_table(report: dict[str, Any], *, failed: bool = True) -> str:
     kinds = _kind_table(report, width)
     if kinds:
         lines += ['', *kinds]
+    confusion = confusion_table(report)
+    if confusion:
+        lines += ['', *confusion]
     tracking = tracking_tables(report, width)
     if tracking:
         lines += ['', *tracking]
