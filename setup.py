@@ -13,7 +13,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')),
+        ('share/' + package_name + '/config',
+         glob('config/*.yaml') + glob('config/*.xml') + glob('config/*.rviz')),
         ('share/' + package_name + '/launch', glob('launch/*.py')),
     ],
     # The committed motion-capture clips (and their licence notices) and the real frames.

@@ -34,6 +34,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'sheet': ('endeff_ros.synth.sheet', 'Draw a contact sheet (PNG) of benchmark bags.'),
     'eval': ('endeff_ros.evaluate', 'Score single-frame and temporal estimators on bags.'),
     'process': ('endeff_ros.bag.process', 'Run the tracker on rosbag2 bags, write results.'),
+    'play': ('endeff_ros.bag.play', 'Publish a bag over DDS with its /clock, for a running node.'),
     'params': ('endeff_ros.core.params_cli', 'Print the parameter table or config YAML.'),
     'mocap-fetch': ('endeff_ros.synth.mocap.fetch',
                     'Copy motion-capture clips of one source into the local cache.'),

@@ -46,7 +46,8 @@ def test_references_the_node_executable_and_its_inputs():
 
 def test_reads_the_packaged_parameter_file(monkeypatch):
     """Import the launch file against stub ``launch`` modules; its yaml reader works."""
-    for name in ('launch', 'launch.actions', 'launch.substitutions', 'launch_ros',
+    for name in ('launch', 'launch.actions', 'launch.conditions', 'launch.substitutions',
+                 'launch_ros',
                  'launch_ros.actions', 'launch_ros.parameter_descriptions',
                  'ament_index_python', 'ament_index_python.packages'):
         if name not in sys.modules or name.startswith('launch'):
@@ -60,3 +61,31 @@ def test_reads_the_packaged_parameter_file(monkeypatch):
     from endeff_ros.core.params import EndeffParams
 
     assert set(params) == set(EndeffParams().to_dict())
+
+
+def test_rviz_config_shows_the_outputs_and_is_installed():
+    """``rviz:=true`` opens config/endeff.rviz, which colcon installs (setup.py) and which
+    shows the node's outputs under the launch file's default namespace: the markers with
+    their labels, the end-effector cloud coloured by its ``kind`` field, the bands, and the
+    depth image as a cloud."""
+    import yaml
+
+    strings = _strings(_tree())
+    assert {'rviz', 'rviz2', 'endeff.rviz'} <= strings
+    setup = (ROOT / 'setup.py').read_text(encoding='utf-8')
+    assert "glob('config/*.rviz')" in setup
+    config = yaml.safe_load((ROOT / 'config' / 'endeff.rviz').read_text(encoding='utf-8'))
+    displays = {d['Class']: d for d in config['Visualization Manager']['Displays']
+                if d.get('Enabled')}
+    markers = displays['rviz_default_plugins/MarkerArray']
+    assert markers['Topic']['Value'] == '/camera/end_effectors/markers'
+    assert markers['Namespaces']['labels'] is True
+    clouds = {d['Topic']['Value']: d for d in config['Visualization Manager']['Displays']
+              if d['Class'] == 'rviz_default_plugins/PointCloud2'}
+    assert clouds['/camera/end_effectors']['Channel Name'] == 'kind'
+    assert clouds['/camera/debug/bands']['Color Transformer'] == 'RGB8'
+    depth = displays['rviz_default_plugins/DepthCloud']
+    assert depth['Depth Map Topic'] == '/camera/depth/image_raw'
+    from endeff_ros.ros import convert
+
+    assert 'kind' in convert.ENDEFF_DTYPE.names

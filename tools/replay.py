@@ -14,7 +14,10 @@ benchmark can report them apart from the bag's own unpaired images.
 
 Run as ``python -m tools.replay BAG`` it publishes a bag to a node that is already running
 (``endeff_node --ros-args -r __ns:=/camera``), as a camera driver would, at a fixed rate:
-``--help`` lists the options.
+``--help`` lists the options. To play a recording as it was recorded (every topic, with
+``/clock``), ``endeff play`` is the user's command (:mod:`endeff_ros.bag.play`,
+docs/output.md); this module is the benchmarks' driver (header-stamp order, jitter,
+lock-step).
 """
 
 from __future__ import annotations
@@ -31,8 +34,12 @@ from typing import Any
 
 import numpy as np
 
+from endeff_ros.bag.play import spin_for, spin_until
 from endeff_ros.bag.reader import BagReader, ReaderOptions
 from endeff_ros.ros import convert
+
+# spin_for and spin_until live in the package, where ``endeff play`` (the user-facing player:
+# every topic with its clock) shares them; tools.session imports them from here.
 
 KINDS = ('camera_info', 'color', 'depth')  # also the send priority at equal stamps
 TOPICS = {'color': 'color/image_raw', 'depth': 'depth/image_raw',
@@ -247,26 +254,6 @@ class Collector:
     def matched(self) -> bool:
         """Every output topic has a publisher."""
         return all(self.node.count_publishers(t) > 0 for t in self.topics.values())
-
-
-def spin_for(executor: Any, seconds: float) -> None:
-    """Spin in bounded steps for ``seconds`` (callbacks keep running)."""
-    end = time.monotonic() + seconds
-    while True:
-        left = end - time.monotonic()
-        if left <= 0:
-            return
-        executor.spin_once(timeout_sec=min(left, 0.005))
-
-
-def spin_until(executor: Any, condition: Any, timeout: float) -> bool:
-    """Spin until ``condition()`` or ``timeout`` s; returns whether it became true."""
-    end = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > end:
-            return False
-        executor.spin_once(timeout_sec=0.01)
-    return True
 
 
 @dataclass
