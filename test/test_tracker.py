@@ -486,11 +486,12 @@ def _limb_away(n_gone: int) -> list[sc.Shot]:
                                                          (3, 0.0, False)])
 def test_end_effector_found_again_soon_takes_its_id_back(n_gone, revive, same):
     """A limb gone for a few frames (its track dropped: no foreground left near its
-    prediction) and back where it was: within T frames of the loss, the new track takes the
-    lost id back (``revive_distance``); later, or with revival off, it gets a new id, never
-    one used before."""
+    prediction) and back where it was: within ``revive_frames`` of the loss, the new track
+    takes the lost id back (``revive_distance``); later, or with revival off, it gets a new
+    id, never one used before."""
     shots = _limb_away(n_gone)
-    r = run(shots, EndeffParams(keep_frames=8, revive_distance=revive), single=False)
+    r = run(shots, EndeffParams(keep_frames=8, revive_frames=8, revive_distance=revive),
+            single=False)
     tip = sc.star_tip(5, 0)
     gone, back = r.labels('gone'), r.labels('back')
     before, d = r.nearest(gone[0] - 1, tip)

@@ -230,6 +230,30 @@ class EndeffParams:
                                 'on the limb of a track that has just gone on its '
                                 'prediction continues that track (0: never).', unit='m',
                                 lo=0.0, hi=5.0)
+    revive_frames: int = _p(30, 'A track dropped at most this many frames ago gives its id back '
+                            '(revive_distance).', lo=0, hi=10000)
+    # Published positions: One Euro filter along each track (Casiez et al. 2012; names as
+    # the paper's), the velocity from it (core/smoothing.py).
+    smoothing: bool = _p(True, 'Publish the position of each track filtered along it (One '
+                         'Euro filter); off: the raw detection or prediction (the velocity '
+                         'is filtered either way).')
+    smoothing_min_cutoff: float = _p(0.3, 'One Euro filter: cutoff frequency of a still '
+                                     'end-effector (lower: smoother when still, more lag '
+                                     'when slow).', symbol='min_cutoff', unit='Hz', lo=0.01,
+                                     hi=100.0)
+    smoothing_beta: float = _p(10.0, 'One Euro filter: cutoff increase per m/s of speed; the '
+                               'lag of a fast end-effector approaches 1 / (2π beta).',
+                               symbol='beta', unit='s/m', lo=0.0, hi=1000.0)
+    smoothing_d_cutoff: float = _p(0.5, 'One Euro filter: cutoff frequency of the velocity '
+                                   'estimate (the published velocity and the speed that '
+                                   'raises the cutoff).', symbol='d_cutoff', unit='Hz',
+                                   lo=0.01, hi=100.0)
+    smoothing_max_lag: float = _p(0.05, 'A filtered position is never farther than this from '
+                                  'the raw one (0: unbounded).', unit='m', lo=0.0, hi=1.0)
+    smoothing_reset_distance: float = _p(0.2, 'A raw step longer than this between frames is '
+                                         'the track moving to another point, not motion: its '
+                                         'filter starts again there, velocity zero (0: '
+                                         'never).', unit='m', lo=0.0, hi=10.0)
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):

@@ -38,6 +38,10 @@ Per frame t+1:
 
 Each track has a stable id, its entity, age, state (detected / predicted) and a confidence
 ``σ^k (T + 1 - m) / (T + 1)`` with m the consecutive unmatched frames (1 for a fresh detection).
+Its published position is filtered along the track (One Euro, :mod:`.smoothing`), which also
+gives its velocity; the tracker itself follows the raw positions, so the filter's lag never
+enters the matching. A track dropped within ``revive_frames`` gives its id back to a new track
+found where it was (:meth:`Tracker._revived_ids`).
 """
 
 from __future__ import annotations
@@ -64,6 +68,7 @@ from .nearest import nearest_point
 from .params import EndeffParams
 from .readable import ReadableArea
 from .single_frame import FrameEstimate, estimate_frame
+from .smoothing import OneEuroParams, one_euro
 from .types import Candidate, Intrinsics, RGBDFrame, Track
 
 if TYPE_CHECKING:
@@ -130,11 +135,13 @@ def _nearest_pairs(d: npt.NDArray[np.float64], radius: float,
 
 
 class _Lost(NamedTuple):
-    """A track dropped in update number ``frame``, last predicted at ``position``."""
+    """A track dropped in update number ``frame``, last predicted at ``position`` and last
+    kept at ``seen`` (where it was before the frame that dropped it)."""
 
     id: int
     position: npt.NDArray[np.float64]
     frame: int
+    seen: npt.NDArray[np.float64]
 
 
 @dataclass
@@ -156,6 +163,12 @@ class _TrackState:
     # From ``position`` (the rounded end's centre, which is tracked) to the part centre
     # published; a prediction keeps the last detection's (Candidate.centre_shift).
     centre_shift: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    # Published position: raw (``position + centre_shift``) and filtered along the track, its
+    # velocity (m/s) and the stamp they belong to (-1: not published yet).
+    raw: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    smoothed: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    velocity: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    stamp_ns: int = -1
 
 
 @dataclass(frozen=True)
@@ -269,6 +282,7 @@ class Tracker:
         t0 = time.perf_counter()
         self._tracks = self._update(estimate, predicted)
         self._anchor(estimate)
+        self._smooth(frame.stamp_ns)
         stages['update'] = (time.perf_counter() - t0) * 1e3
         self._prev = frame
         if self.params.background:  # tracked entities are never absorbed by the background
@@ -478,7 +492,8 @@ class Tracker:
                 # (a one-off candidate is not kept alive).
                 if (pr.node < 0 or track.missed + 1 > min(p.keep_frames, track.hits)
                         or track.hits < p.confirm_hits):
-                    self._lost.append(_Lost(track.id, pr.position, self._frame))
+                    self._lost.append(_Lost(track.id, pr.position, self._frame,
+                                            track.position.copy()))
                     continue
                 self._take_prediction(track, pr, pred_geo, missed=True)
                 survivors.append(track)
@@ -535,20 +550,28 @@ class Tracker:
 
     def _revived_ids(self, positions: list[npt.NDArray[np.float64]]) -> list[int]:
         """Ids for new tracks at ``positions``. A track dropped within the last
-        ``keep_frames`` frames gives its id back to the nearest new track within
-        ``revive_distance`` of where it was last predicted (nearest pairs first): the same
-        end-effector found again after a short loss (a hand that was no extremum for a few
-        frames, a foot lost while the camera turns) keeps its id for a subscriber. So does
-        one too young to have been kept alive (``confirm_hits``): an end that is an extreme
-        in a frame or two at a time would otherwise get a new id each time. The distance
-        allows for T frames of motion at about 1 m/s since the loss (0.27 m at 30 Hz).
+        ``revive_frames`` frames gives its id back to the nearest new track within
+        ``revive_distance`` of where it was last predicted or last kept (nearest pairs
+        first): the same end-effector found again after a loss (a hand that was no extremum
+        for a few frames, a foot hidden behind the other leg for half a second, a foot lost
+        while the camera turns) keeps its id for a subscriber. So does one too young to have
+        been kept alive (``confirm_hits``): an end that is an extreme in a frame or two at a
+        time would otherwise get a new id each time. Where it was kept counts as well as its
+        last prediction because a track is mostly dropped when that prediction left the
+        foreground (the flow lost the part), so the prediction is the wrong place to look
+        for it. The window is longer than T (case C keeps a track alive on its prediction,
+        which costs false positives; remembering an id costs nothing): most of the ends
+        found again under a new id on the dev split had been lost for 4 frames or more.
         Otherwise a new id, never used before."""
         p = self.params
-        self._lost = [lost for lost in self._lost if self._frame - lost.frame <= p.keep_frames]
+        self._lost = [lost for lost in self._lost if self._frame - lost.frame <= p.revive_frames]
         ids: list[int | None] = [None] * len(positions)
         if self._lost and positions:
-            d = np.linalg.norm(np.array(positions)[:, None]
-                               - np.array([lost.position for lost in self._lost])[None], axis=2)
+            new = np.array(positions)[:, None]
+            d = np.minimum(
+                np.linalg.norm(new - np.array([lost.position for lost in self._lost])[None],
+                               axis=2),
+                np.linalg.norm(new - np.array([lost.seen for lost in self._lost])[None], axis=2))
             pairs = _nearest_pairs(d, p.revive_distance)
             for i, k in pairs:
                 ids[i] = self._lost[k].id
@@ -625,12 +648,33 @@ class Tracker:
         self._next_id += 1
         return self._next_id - 1
 
+    def _smooth(self, stamp_ns: int) -> None:
+        """Filter each track's published position along the track (One Euro,
+        :mod:`.smoothing`) and estimate its velocity; a track's first frame takes its raw
+        position and zero velocity. Output only: the tracker itself follows the raw
+        positions, so the filter's lag never enters the matching."""
+        p = self.params
+        raw = np.array([t.position + t.centre_shift for t in self._tracks]).reshape(-1, 3)
+        old = np.array([t.stamp_ns >= 0 for t in self._tracks], dtype=bool)
+        smoothed, velocity = raw.copy(), np.zeros_like(raw)
+        if old.any():
+            tracks = [t for t, o in zip(self._tracks, old, strict=True) if o]
+            dt = (stamp_ns - np.array([t.stamp_ns for t in tracks], dtype=np.float64)) * 1e-9
+            smoothed[old], velocity[old] = one_euro(
+                raw[old], [t.raw for t in tracks], [t.smoothed for t in tracks],
+                [t.velocity for t in tracks], dt,
+                OneEuroParams(p.smoothing_min_cutoff, p.smoothing_beta, p.smoothing_d_cutoff,
+                              p.smoothing_max_lag, p.smoothing_reset_distance))
+        for t, r, s, v in zip(self._tracks, raw, smoothed, velocity, strict=True):
+            t.raw, t.smoothed, t.velocity, t.stamp_ns = r, s, v, stamp_ns
+
     def _publish(self, t: _TrackState) -> Track:
         p = self.params
         confidence = (p.memory_sigma ** t.not_related
                       * (p.keep_frames + 1 - t.missed) / (p.keep_frames + 1))
         return Track(id=t.id, entity=t.entity,
-                     position=np.array(t.position + t.centre_shift, dtype=np.float64),
+                     position=np.array(t.smoothed if p.smoothing else t.raw, dtype=np.float64),
                      geodesic=float(t.geodesic), confidence=float(np.clip(confidence, 0, 1)),
                      state=Track.DETECTED if t.detected else Track.PREDICTED, age=t.age,
-                     path=t.path)
+                     path=t.path, velocity=np.array(t.velocity, dtype=np.float64),
+                     raw_position=np.array(t.raw, dtype=np.float64))

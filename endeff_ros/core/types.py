@@ -161,7 +161,9 @@ class Track:
 
     ``state`` is 0 when a current-frame candidate supports it, 1 when it is predicted only.
     ``velocity`` (m/s, optical frame) is the track's, zero in its first frame; ``kind`` which
-    part of a person the end is (``KIND_*``; 0: other or not known).
+    part of a person the end is (``KIND_*``; 0: other or not known). ``position`` is filtered
+    along the track when the tracker smooths (``smoothing``); ``raw_position`` is then the
+    unfiltered one, for debugging (None: the same as ``position``).
     """
 
     id: int
@@ -174,6 +176,7 @@ class Track:
     path: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
     velocity: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     kind: int = 0
+    raw_position: npt.NDArray[np.float64] | None = None
 
     DETECTED = 0
     PREDICTED = 1

@@ -1,0 +1,133 @@
+"""Where the temporal estimator's id switches come from: each switch by its cause.
+
+Per ground-truth end-effector (its ``id`` field, else its row), frames matched as ``endeff
+eval`` matches them (Hungarian within 0.15 m, :mod:`endeff_ros.tracking_metrics`): a switch is
+a match to track B after the last match was to track A != B. Its cause, in this order:
+
+- ``lost_new``: A was dropped (``lost_<why>`` names why, as :mod:`tools.track_history` does:
+  ``left``, ``unconfirmed``, ``short``, ``expired``, ``duplicate``) and B started after A's
+  last match: the end lost and found again under a new id;
+- ``lost_other``: A was dropped and B is an older track that came over;
+- ``swap``: A is still published and matched to another end-effector (the tracks of two
+  limbs exchanged their ends: a case A or B pairing across limbs);
+- ``duplicate_new``: A is still published, matched to nothing, and B started after A's last
+  match: a second track on the same end took it over in the frame's matching;
+- ``duplicate_old``: as ``duplicate_new`` with an older B.
+
+Each cause counts per kind (head, hand, foot; ``other``); ``entity_changed`` counts the
+switches whose B lies in another entity than A did at its last match, and ``gap`` the frames
+between the two matches (1: consecutive), as a histogram (1, 2-3, 4-9, 10+), overall and per
+cause. A tally for the tracker's work, not a score.
+
+    python -m tools.id_switches BAG_OR_DIR [...] [--every N] [--params YAML] [--jobs 2]
+                                [--json OUT]
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from endeff_ros.attributes import custom_data, parse_attributes
+from endeff_ros.bag.reader import BagReader
+from endeff_ros.cli_common import print_json
+from endeff_ros.core.errors import InputError
+from endeff_ros.core.params import EndeffParams
+from endeff_ros.evaluate import gt_ids, is_person_sequence
+from endeff_ros.scoring import kinds_of_ids, score_frame
+from tools.per_bag import parse_bag_args, run_per_bag
+from tools.track_history import _RecordingTracker
+
+CAUSES = ('lost_new', 'lost_other', 'swap', 'duplicate_new', 'duplicate_old')
+GAPS = ((1, 1), (2, 3), (4, 9), (10, 10**9))
+
+
+def _gap_name(gap: int) -> str:
+    for lo, hi in GAPS:
+        if lo <= gap <= hi:
+            return f'{lo}' if lo == hi else f'{lo}+' if hi > 10**6 else f'{lo}-{hi}'
+    return '?'
+
+
+def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
+    """Switch counts of one bag, per kind and cause."""
+    tracker = _RecordingTracker(params or EndeffParams())
+    counts: dict[str, dict[str, int]] = {}
+    detail: dict[str, int] = {}
+    last: dict[int, tuple[int, int, int]] = {}  # gt key -> (frame, track id, entity)
+    born: dict[int, int] = {}  # track id -> frame it was first published (this life)
+    why_dropped: dict[int, str] = {}
+    matches = 0
+    with BagReader(bag) as reader:
+        attributes, _ = parse_attributes(custom_data(reader.reader), str(bag))
+        person = is_person_sequence(bag.name, attributes)
+        ids = gt_ids(reader)
+        for index, (frame, gt) in enumerate(reader.frames()):
+            try:
+                tracks = tracker.update(frame).tracks
+            except InputError:
+                continue
+            for track_id, why in tracker.dropped.items():
+                why_dropped[track_id] = why
+                born.pop(track_id, None)
+            for t in tracks:
+                born.setdefault(t.id, index)
+            if gt is None or len(gt) == 0:
+                continue
+            gt = gt[:, :3]
+            frame_ids = ids.get(frame.stamp_ns)
+            aligned = frame_ids is not None and len(frame_ids) == len(gt)
+            keys = frame_ids if aligned else np.arange(len(gt))
+            kinds = (kinds_of_ids(frame_ids, person=person) if aligned
+                     else np.full(len(gt), 'unknown'))
+            pos = np.array([t.position for t in tracks]).reshape(-1, 3)
+            score = score_frame(pos, gt)
+            by_id = {t.id: t for t in tracks}
+            matched_tracks = {tracks[e].id for e, _ in score.matches}
+            for e, g in score.matches:
+                key, track = int(keys[g]), tracks[e]
+                matches += 1
+                prev = last.get(key)
+                last[key] = (index, track.id, track.entity)
+                if prev is None or prev[1] == track.id:
+                    continue
+                t0, a, entity = prev
+                if a not in by_id:
+                    cause = 'lost_new' if born[track.id] > t0 else 'lost_other'
+                    detail_key = f'{cause}:{why_dropped.get(a, "unknown")}'
+                elif a in matched_tracks:
+                    cause = detail_key = 'swap'
+                else:
+                    cause = 'duplicate_new' if born[track.id] > t0 else 'duplicate_old'
+                    detail_key = cause
+                kind = str(kinds[g])
+                c = counts.setdefault(kind, dict.fromkeys(CAUSES, 0))
+                c[cause] += 1
+                detail[detail_key] = detail.get(detail_key, 0) + 1
+                for name in (f'gap_{_gap_name(index - t0)}',
+                             f'{cause}:gap_{_gap_name(index - t0)}'):
+                    detail[name] = detail.get(name, 0) + 1
+                if track.entity != entity:
+                    detail['entity_changed'] = detail.get('entity_changed', 0) + 1
+    return {'bag': bag.name, 'matches': matches, 'switches': counts, 'detail': detail}
+
+
+def main(argv: list[str] | None = None) -> int:
+    args, bags, params = parse_bag_args(__doc__, argv, 'id_switches')
+    per_bag = run_per_bag(check_bag, bags, params, args.jobs)
+    kinds = sorted({k for r in per_bag for k in r['switches']})
+    total = {k: {c: sum(r['switches'].get(k, {}).get(c, 0) for r in per_bag) for c in CAUSES}
+             for k in kinds}
+    details = sorted({d for r in per_bag for d in r['detail']})
+    print_json({'matches': sum(r['matches'] for r in per_bag),
+                'switches': {c: sum(total[k][c] for k in kinds) for c in CAUSES},
+                'per_kind': total,
+                'detail': {d: sum(r['detail'].get(d, 0) for r in per_bag) for d in details},
+                'bags': per_bag}, args.json)
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
