@@ -37,7 +37,9 @@ Failure modes (documented in docs/output.md): a person lying down or crawling is
 handstand puts the feet above the root (they become hands); a foot raised for long (a kick
 held, a foot on a chair) becomes a hand once its votes are outweighed; two people touching
 are one entity (one head between them); a person that a table or furniture cuts in the
-middle rests on nothing in view and keeps the kinds its ends had (new ends are 0).
+middle rests on nothing in view and keeps the kinds its ends had (new ends are 0); furniture
+taller than :data:`PERSON_MIN_SPAN` that moves (so the background does not take it) and shows
+three ends is a person.
 
 Pure numpy: no ROS import (the core's rule).
 """
