@@ -97,6 +97,9 @@ def test_colcon_install_layout_matches_ros2_run(install: Path,
     assert (prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / PACKAGE).is_file()
     assert (share / 'package.xml').read_bytes() == (REPO / 'package.xml').read_bytes()
     assert (share / 'config' / 'endeff.yaml').read_bytes() == CONFIG.read_bytes()
+    # rviz:=true of the launch file opens the installed RViz2 configuration.
+    assert (share / 'config' / 'endeff.rviz').read_bytes() == (
+        REPO / 'config' / 'endeff.rviz').read_bytes()
     launch_src = sorted(p.name for p in (REPO / 'launch').glob('*.py'))
     launch_dst = sorted(p.name for p in (share / 'launch').glob('*.py'))
     assert launch_dst == launch_src, 'launch files missing from the install'
