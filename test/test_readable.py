@@ -75,7 +75,7 @@ def test_learnt_from_the_stream_a_person_does_not_hide_the_edge():
     """A person standing in the left margin's edge for a frame: the readings of earlier frames
     keep the line where the sensor's readings stop."""
     area = ReadableArea()
-    for k in range(3):
+    for _ in range(3):
         area.update(kinect_margins(room()), STRIDE, 3)
     occluded = kinect_margins(room())
     occluded[100:400, 41:120] = np.nan  # a black coat absorbs the light

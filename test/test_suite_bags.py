@@ -14,13 +14,13 @@ from rosbags.highlevel import AnyReader
 from endeff_ros.attributes import ATTRIBUTES_KEY, custom_data, parse_attributes
 from endeff_ros.bag.reader import read_frames
 from endeff_ros.synth import cli as synth_cli
+from endeff_ros.synth.cases import suite_specs
 from endeff_ros.synth.proc_clips import sit_clip, walk_clip, wave_clip
 from endeff_ros.synth.sensors import SENSORS
 from endeff_ros.synth.suite import (
     DETAILS_KEY,
     QUICK_FRAMES,
     BagRenderer,
-    suite_specs,
     write_bag,
 )
 

@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 
 from endeff_ros.synth import cli as synth_cli
+from endeff_ros.synth.cases import suite_specs
 from endeff_ros.synth.proc_clips import walk_clip, wave_clip
 from endeff_ros.synth.render import Camera, render
 from endeff_ros.synth.room import background_entity
 from endeff_ros.synth.sensor import depth_to_mm
 from endeff_ros.synth.sensors import SENSORS, DeadMargin, sensor_depth, without_margin
-from endeff_ros.synth.suite import BagRenderer, suite_specs
+from endeff_ros.synth.suite import BagRenderer
 
 
 def _room(model):

@@ -11,14 +11,14 @@ import pytest
 
 from endeff_ros.attributes import attribute_groups
 from endeff_ros.synth import cli as synth_cli
-from endeff_ros.synth.cases import MOCAP_FULL, MOCAP_QUICK
+from endeff_ros.synth.cases import MOCAP_FULL, MOCAP_QUICK, suite_specs
 from endeff_ros.synth.mocap.catalogue import load_clips
 from endeff_ros.synth.mocap.clip import JOINT_INDEX as J
 from endeff_ros.synth.motion import MOTIONS, breathe, seat, stretch
 from endeff_ros.synth.proc_clips import walk_clip, wave_clip
 from endeff_ros.synth.render import render
 from endeff_ros.synth.rooms_suite import rooms_specs
-from endeff_ros.synth.suite import BagRenderer, suite_specs
+from endeff_ros.synth.suite import BagRenderer
 
 
 @pytest.fixture(scope='module')

@@ -8,10 +8,11 @@ import argparse
 import pytest
 
 from endeff_ros.synth import cli as synth_cli
+from endeff_ros.synth.cases import suite_specs
 from endeff_ros.synth.mocap.catalogue import CLIPS, SOURCES, load_clips
 from endeff_ros.synth.mocap.clip import MotionClip
 from endeff_ros.synth.proc_clips import sit_clip, walk_clip, wave_clip
-from endeff_ros.synth.suite import catalogue_index, suite_specs
+from endeff_ros.synth.suite import catalogue_index
 
 
 def _stand_in(entry) -> MotionClip:

@@ -39,12 +39,20 @@ from .motion import CASES, cycled, feet_together, standing_score, travel_frames
 from .sensors import SENSORS
 from .skeleton_body import standing_height
 from .suite import (
+    _PEOPLE,
     _SENSORS,
     FPS,
+    FULL_MAX_S,
+    QUICK_BAGS,
+    QUICK_FRAMES,
     BagSpec,
     PersonSpec,
     _style,
+    catalogue_index,
+    draw_spec,
+    resampled,
     safe_name,
+    set_margins,
     window_start,
 )
 from .views import FARTHEST_M, View
@@ -233,3 +241,43 @@ def draw_case(k: int, row: Row, clip: MotionClip, pos: npt.NDArray[np.float64],
              'case': row.case}
     return BagSpec(name, (person,), int(frames), room, 'sit' if seated else 'none',
                    sensor.name, int(rng.integers(2**31)), attrs)
+
+
+def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int = 0,
+                max_s: float = FULL_MAX_S, catalogue: Sequence[str] | None = None,
+                margins: bool = True) -> list[BagSpec]:
+    """The suite's bag specs for ``clips``: quick = ``QUICK_BAGS`` bags (clips repeat if
+    fewer) of ``QUICK_FRAMES`` frames; full = one bag per clip, each up to ``max_s`` s (its
+    most active segment), plus one multi-person bag for each clip in the first eighth of the
+    catalogue (``catalogue_index``, which numbers the full suite's bags); then, in both, the
+    still and slow bags of this module (``MOCAP_QUICK``, ``MOCAP_FULL``). ``margins``: false
+    renders every bag without its sensor's dead margins (same names: a twin for comparison)."""
+    if not clips:
+        msg = 'the mocap suite needs at least one clip'
+        raise ValueError(msg)
+    if not max_s > 0:
+        msg = f'max_s must be positive, got {max_s}'
+        raise ValueError(msg)
+    order = sorted(clips, key=lambda c: c.name)
+    pos = {c.name: resampled(c) for c in order}
+    specs = []
+    if quick:
+        for i in range(max(QUICK_BAGS, len(order))):
+            rng = np.random.default_rng([seed, 7, i])
+            specs.append(draw_spec(i, order[i % len(order)], order, pos, QUICK_FRAMES,
+                                   _PEOPLE[i % len(_PEOPLE)], rng, quick))
+        specs += case_specs(order, pos, MOCAP_QUICK, seed)
+        return set_margins(specs, margins)
+    index = catalogue_index(order, catalogue)
+    total = len(index)
+    # One bag per clip (the first pass over the catalogue), then the multi-person bags of the
+    # first eighth of the catalogue (the second pass: the cycles shift by one lap).
+    bags = [(index[c.name], c, 1, 0) for c in order]
+    bags += [(total + index[c.name], c, 2 + (total + index[c.name]) % 2, 1) for c in order
+             if index[c.name] < total // 8]
+    for i, clip, people, lap in sorted(bags, key=lambda b: b[0]):
+        rng = np.random.default_rng([seed, 7, i])
+        n = int(min(len(pos[clip.name]), max(2, round(max_s * FPS))))
+        specs.append(draw_spec(i, clip, order, pos, n, people, rng, quick, lap=lap))
+    specs += case_specs(order, pos, MOCAP_FULL, seed)
+    return set_margins(specs, margins)

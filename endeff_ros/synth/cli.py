@@ -164,8 +164,8 @@ def _mocap_one(spec, clips: dict, out: Path, storages: list[str]) -> dict:
 
 def _suite_specs(args: argparse.Namespace, clips: list) -> list:
     """The specs of ``args.suite`` (mocap or rooms) for ``clips``."""
+    from .cases import suite_specs
     from .rooms_suite import rooms_specs
-    from .suite import suite_specs
 
     max_s = getattr(args, 'max_seconds', None)
     margins = not getattr(args, 'no_margins', False)

@@ -1,6 +1,6 @@
 """The ``mocap`` suite: motion-capture clips rendered as benchmark bags with attributes.
 
-``suite_specs(clips, quick=...)`` turns a clip catalogue into a deterministic list of
+``cases.suite_specs(clips, quick=...)`` turns a clip catalogue into a deterministic list of
 ``BagSpec`` (clip segment, body, view, room, sensor, people, seed); ``BagRenderer`` renders one
 spec into ``SynthFrame``s; ``write_bag`` writes it in the benchmark-bag form with its
 attributes in the rosbag2 metadata (``custom_data``, key ``attributes.ATTRIBUTES_KEY``).
@@ -223,48 +223,6 @@ def catalogue_index(clips: Sequence[MotionClip],
     known = set(names)
     names += sorted({c.name for c in clips} - known)
     return {name: k for k, name in enumerate(names)}
-
-
-def suite_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int = 0,
-                max_s: float = FULL_MAX_S, catalogue: Sequence[str] | None = None,
-                margins: bool = True) -> list[BagSpec]:
-    """The suite's bag specs for ``clips``: quick = ``QUICK_BAGS`` bags (clips repeat if
-    fewer) of ``QUICK_FRAMES`` frames; full = one bag per clip, each up to ``max_s`` s (its
-    most active segment), plus one multi-person bag for each clip in the first eighth of the
-    catalogue (``catalogue_index``, which numbers the full suite's bags); then, in both, the
-    still and slow bags of ``cases.py`` (``MOCAP_QUICK``, ``MOCAP_FULL``). ``margins``: false
-    renders every bag without its sensor's dead margins (same names: a twin for comparison)."""
-    if not clips:
-        msg = 'the mocap suite needs at least one clip'
-        raise ValueError(msg)
-    if not max_s > 0:
-        msg = f'max_s must be positive, got {max_s}'
-        raise ValueError(msg)
-    from .cases import MOCAP_FULL, MOCAP_QUICK, case_specs
-
-    order = sorted(clips, key=lambda c: c.name)
-    pos = {c.name: resampled(c) for c in order}
-    specs = []
-    if quick:
-        for i in range(max(QUICK_BAGS, len(order))):
-            rng = np.random.default_rng([seed, 7, i])
-            specs.append(draw_spec(i, order[i % len(order)], order, pos, QUICK_FRAMES,
-                                   _PEOPLE[i % len(_PEOPLE)], rng, quick))
-        specs += case_specs(order, pos, MOCAP_QUICK, seed)
-        return set_margins(specs, margins)
-    index = catalogue_index(order, catalogue)
-    total = len(index)
-    # One bag per clip (the first pass over the catalogue), then the multi-person bags of the
-    # first eighth of the catalogue (the second pass: the cycles shift by one lap).
-    bags = [(index[c.name], c, 1, 0) for c in order]
-    bags += [(total + index[c.name], c, 2 + (total + index[c.name]) % 2, 1) for c in order
-             if index[c.name] < total // 8]
-    for i, clip, people, lap in sorted(bags, key=lambda b: b[0]):
-        rng = np.random.default_rng([seed, 7, i])
-        n = int(min(len(pos[clip.name]), max(2, round(max_s * FPS))))
-        specs.append(draw_spec(i, clip, order, pos, n, people, rng, quick, lap=lap))
-    specs += case_specs(order, pos, MOCAP_FULL, seed)
-    return set_margins(specs, margins)
 
 
 def set_margins(specs: Sequence[BagSpec], margins: bool) -> list[BagSpec]:
