@@ -30,15 +30,11 @@ from typing import Any
 
 import numpy as np
 
-from endeff_ros.attributes import custom_data, parse_attributes
-from endeff_ros.bag.reader import BagReader
 from endeff_ros.cli_common import print_json
-from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
-from endeff_ros.evaluate import gt_ids, is_person_sequence
-from endeff_ros.scoring import kinds_of_ids, score_frame
+from endeff_ros.scoring import score_frame
 from tools.per_bag import parse_bag_args, run_per_bag
-from tools.track_history import _RecordingTracker
+from tools.track_history import _RecordingTracker, tracked_frames
 
 CAUSES = ('lost_new', 'lost_other', 'swap', 'duplicate_new', 'duplicate_old')
 GAPS = ((1, 1), (2, 3), (4, 9), (10, 10**9))
@@ -60,57 +56,43 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
     born: dict[int, int] = {}  # track id -> frame it was first published (this life)
     why_dropped: dict[int, str] = {}
     matches = 0
-    with BagReader(bag) as reader:
-        attributes, _ = parse_attributes(custom_data(reader.reader), str(bag))
-        person = is_person_sequence(bag.name, attributes)
-        ids = gt_ids(reader)
-        for index, (frame, gt) in enumerate(reader.frames()):
-            try:
-                tracks = tracker.update(frame).tracks
-            except InputError:
+    for index, tracks, dropped, gt, keys, kinds, _ in tracked_frames(bag, tracker):
+        for track_id, why in dropped.items():
+            why_dropped[track_id] = why
+            born.pop(track_id, None)
+        for t in tracks:
+            born.setdefault(t.id, index)
+        if gt is None:
+            continue
+        pos = np.array([t.position for t in tracks]).reshape(-1, 3)
+        score = score_frame(pos, gt)
+        by_id = {t.id: t for t in tracks}
+        matched_tracks = {tracks[e].id for e, _ in score.matches}
+        for e, g in score.matches:
+            key, track = int(keys[g]), tracks[e]
+            matches += 1
+            prev = last.get(key)
+            last[key] = (index, track.id, track.entity)
+            if prev is None or prev[1] == track.id:
                 continue
-            for track_id, why in tracker.dropped.items():
-                why_dropped[track_id] = why
-                born.pop(track_id, None)
-            for t in tracks:
-                born.setdefault(t.id, index)
-            if gt is None or len(gt) == 0:
-                continue
-            gt = gt[:, :3]
-            frame_ids = ids.get(frame.stamp_ns)
-            aligned = frame_ids is not None and len(frame_ids) == len(gt)
-            keys = frame_ids if aligned else np.arange(len(gt))
-            kinds = (kinds_of_ids(frame_ids, person=person) if aligned
-                     else np.full(len(gt), 'unknown'))
-            pos = np.array([t.position for t in tracks]).reshape(-1, 3)
-            score = score_frame(pos, gt)
-            by_id = {t.id: t for t in tracks}
-            matched_tracks = {tracks[e].id for e, _ in score.matches}
-            for e, g in score.matches:
-                key, track = int(keys[g]), tracks[e]
-                matches += 1
-                prev = last.get(key)
-                last[key] = (index, track.id, track.entity)
-                if prev is None or prev[1] == track.id:
-                    continue
-                t0, a, entity = prev
-                if a not in by_id:
-                    cause = 'lost_new' if born[track.id] > t0 else 'lost_other'
-                    detail_key = f'{cause}:{why_dropped.get(a, "unknown")}'
-                elif a in matched_tracks:
-                    cause = detail_key = 'swap'
-                else:
-                    cause = 'duplicate_new' if born[track.id] > t0 else 'duplicate_old'
-                    detail_key = cause
-                kind = str(kinds[g])
-                c = counts.setdefault(kind, dict.fromkeys(CAUSES, 0))
-                c[cause] += 1
-                detail[detail_key] = detail.get(detail_key, 0) + 1
-                for name in (f'gap_{_gap_name(index - t0)}',
-                             f'{cause}:gap_{_gap_name(index - t0)}'):
-                    detail[name] = detail.get(name, 0) + 1
-                if track.entity != entity:
-                    detail['entity_changed'] = detail.get('entity_changed', 0) + 1
+            t0, a, entity = prev
+            if a not in by_id:
+                cause = 'lost_new' if born[track.id] > t0 else 'lost_other'
+                detail_key = f'{cause}:{why_dropped.get(a, "unknown")}'
+            elif a in matched_tracks:
+                cause = detail_key = 'swap'
+            else:
+                cause = 'duplicate_new' if born[track.id] > t0 else 'duplicate_old'
+                detail_key = cause
+            kind = str(kinds[g])
+            c = counts.setdefault(kind, dict.fromkeys(CAUSES, 0))
+            c[cause] += 1
+            detail[detail_key] = detail.get(detail_key, 0) + 1
+            for name in (f'gap_{_gap_name(index - t0)}',
+                         f'{cause}:gap_{_gap_name(index - t0)}'):
+                detail[name] = detail.get(name, 0) + 1
+            if track.entity != entity:
+                detail['entity_changed'] = detail.get('entity_changed', 0) + 1
     return {'bag': bag.name, 'matches': matches, 'switches': counts, 'detail': detail}
 
 

@@ -31,10 +31,12 @@ A tally of causes for the tracker's work, not a score.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 
 from endeff_ros.attributes import custom_data, parse_attributes
 from endeff_ros.bag.reader import BagReader
@@ -93,13 +95,23 @@ class _RecordingTracker(Tracker):
         return survivors
 
 
-def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
-    """History counts of one bag's ground-truth points, per kind."""
-    tracker = _RecordingTracker(params or EndeffParams())
-    history: dict[str, dict[str, int]] = {}
-    lost: dict[str, dict[str, int]] = {}
-    last: dict[int, tuple[int, int]] = {}  # ground-truth key -> (frame, track id)
-    why_dropped: dict[int, str] = {}
+class TrackedFrame(NamedTuple):
+    """One frame of :func:`tracked_frames`: the tracker's tracks, the tracks it dropped in
+    that update (id -> why), and the frame's ground truth (None without) with its keys (the
+    ground-truth ids, or positions when the ids do not line up) and kinds."""
+
+    index: int
+    tracks: list[Any]
+    dropped: dict[int, str]
+    gt: npt.NDArray[np.float64] | None
+    keys: npt.NDArray[np.int64]
+    kinds: npt.NDArray[Any]
+    frame_ids: npt.NDArray[np.int64] | None
+
+
+def tracked_frames(bag: Path, tracker: _RecordingTracker) -> Iterator[TrackedFrame]:
+    """The recording ``tracker`` run over ``bag``, frame by frame (frames the tracker rejects
+    are left out)."""
     with BagReader(bag) as reader:
         attributes, _ = parse_attributes(custom_data(reader.reader), str(bag))
         person = is_person_sequence(bag.name, attributes)
@@ -109,9 +121,9 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
                 tracks = tracker.update(frame).tracks
             except InputError:
                 continue
-            for track_id, why in tracker.dropped.items():
-                why_dropped.setdefault(track_id, why)
             if gt is None or len(gt) == 0:
+                yield TrackedFrame(index, tracks, dict(tracker.dropped), None,
+                                   np.zeros(0, np.int64), np.zeros(0, object), None)
                 continue
             gt = gt[:, :3]
             frame_ids = ids.get(frame.stamp_ns)
@@ -119,35 +131,50 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
             keys = frame_ids if aligned else np.arange(len(gt))
             kinds = (kinds_of_ids(frame_ids, person=person) if aligned
                      else np.full(len(gt), 'unknown'))
-            matched, _ = matched_ids(np.array([t.position for t in tracks]),
-                                     [t.id for t in tracks], gt, frame_ids)
-            matched_tracks = set(matched.values())
-            by_id = {t.id: t for t in tracks}
-            for g in range(len(gt)):
-                key, kind = int(keys[g]), str(kinds[g])
-                h = history.setdefault(kind, dict.fromkeys(HISTORY, 0))
-                if key in matched:
-                    h['found'] += 1
-                    last[key] = (index, matched[key])
-                    continue
-                if key not in last:
-                    h['never'] += 1
-                    continue
-                since = index - last[key][0]
-                h['within_10' if since <= RECENT[0] else
-                  'within_30' if since <= RECENT[1] else 'later'] += 1
-                if since > RECENT[1]:
-                    continue
-                track_id = last[key][1]
-                track = by_id.get(track_id)
-                if track is None:
-                    cls = why_dropped.get(track_id, 'gone_duplicate')
-                elif track_id in matched_tracks:
-                    cls = 'matched_other'
-                else:
-                    near = np.linalg.norm(track.position - gt[g]) <= NEAR_M
-                    cls = 'alive_near' if near else 'alive_far'
-                lost.setdefault(kind, dict.fromkeys(LOST, 0))[cls] += 1
+            yield TrackedFrame(index, tracks, dict(tracker.dropped), gt, keys, kinds, frame_ids)
+
+
+def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
+    """History counts of one bag's ground-truth points, per kind."""
+    tracker = _RecordingTracker(params or EndeffParams())
+    history: dict[str, dict[str, int]] = {}
+    lost: dict[str, dict[str, int]] = {}
+    last: dict[int, tuple[int, int]] = {}  # ground-truth key -> (frame, track id)
+    why_dropped: dict[int, str] = {}
+    for index, tracks, dropped, gt, keys, kinds, frame_ids in tracked_frames(bag, tracker):
+        for track_id, why in dropped.items():
+            why_dropped.setdefault(track_id, why)
+        if gt is None:
+            continue
+        matched, _ = matched_ids(np.array([t.position for t in tracks]),
+                                 [t.id for t in tracks], gt, frame_ids)
+        matched_tracks = set(matched.values())
+        by_id = {t.id: t for t in tracks}
+        for g in range(len(gt)):
+            key, kind = int(keys[g]), str(kinds[g])
+            h = history.setdefault(kind, dict.fromkeys(HISTORY, 0))
+            if key in matched:
+                h['found'] += 1
+                last[key] = (index, matched[key])
+                continue
+            if key not in last:
+                h['never'] += 1
+                continue
+            since = index - last[key][0]
+            h['within_10' if since <= RECENT[0] else
+              'within_30' if since <= RECENT[1] else 'later'] += 1
+            if since > RECENT[1]:
+                continue
+            track_id = last[key][1]
+            track = by_id.get(track_id)
+            if track is None:
+                cls = why_dropped.get(track_id, 'gone_duplicate')
+            elif track_id in matched_tracks:
+                cls = 'matched_other'
+            else:
+                near = np.linalg.norm(track.position - gt[g]) <= NEAR_M
+                cls = 'alive_near' if near else 'alive_far'
+            lost.setdefault(kind, dict.fromkeys(LOST, 0))[cls] += 1
     return {'bag': bag.name, 'history': history, 'lost_track': lost}
 
 
