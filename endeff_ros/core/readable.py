@@ -140,13 +140,20 @@ class ReadableArea:
     def __init__(self) -> None:
         self._ever: npt.NDArray[np.bool_] | None = None
         self._stride = 0
+        self._edges: Edges | None = None
+        self._margin_px = -1.0
 
     def update(self, depth: npt.NDArray[np.floating], stride: int,
                margin_px: float) -> Edges:
-        """Learn the readings of ``depth`` (full resolution) and return the edges."""
+        """Learn the readings of ``depth`` (full resolution) and return the edges, fitted
+        again only when a pixel read for the first time (a still camera's readable area
+        stops growing within seconds, and the fit is the same until it grows)."""
         read = strided_read(depth, stride)
         if self._ever is None or self._ever.shape != read.shape or self._stride != stride:
-            self._ever, self._stride = read.copy(), stride
-        else:
+            self._ever, self._stride, self._edges = read.copy(), stride, None
+        elif (read & ~self._ever).any():
             self._ever |= read
-        return fit_edges(self._ever, stride, margin_px)
+            self._edges = None
+        if self._edges is None or self._margin_px != margin_px:
+            self._edges, self._margin_px = fit_edges(self._ever, stride, margin_px), margin_px
+        return self._edges
