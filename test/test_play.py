@@ -55,6 +55,25 @@ def _domain() -> int:
     return 150 + os.getpid() % 30
 
 
+def _graph_ready(topic: str, domain_id: int, timeout: float) -> bool:
+    """Wait until ``topic`` has a publisher and a subscriber in the graph of ``domain_id``."""
+    import rclpy
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    node = rclpy.create_node('play_test_graph', context=context)
+    try:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if node.count_publishers(topic) and node.count_subscribers(topic):
+                return True
+            time.sleep(0.2)
+        return False
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+
+
 @pytest.fixture(scope='module')
 def person_bag(tmp_path_factory):
     from endeff_ros.synth.cli import generate_one
@@ -157,6 +176,10 @@ def test_the_node_answers_a_played_bag_and_the_example_prints_its_kinds(person_b
     example = start([str(EXAMPLE), '--kind', 'any', '--count', '4'], env,
                     stdout=logs['example'], stderr=subprocess.STDOUT)
     try:
+        # ``play --wait`` waits for the node only: a quick bag plays in seconds, so on a slow
+        # machine the example could still be starting when the last cloud goes out.
+        assert _graph_ready('/camera/end_effectors', int(env['ROS_DOMAIN_ID']), 90), \
+            'the node and the example did not meet on /camera/end_effectors within 90 s'
         play = subprocess.run([*ENDEFF, 'play', str(person_bag), '--wait', '60',
                                '--rate', '0.25'], env=env, capture_output=True, text=True,
                               timeout=240, check=False)
@@ -174,10 +197,11 @@ def test_the_node_answers_a_played_bag_and_the_example_prints_its_kinds(person_b
         fh.close()
     assert play.returncode == 0, play.stdout + play.stderr
     assert '/clock messages' in play.stdout
-    assert example.returncode == 0, f'{text["example"]}\n--- node ---\n{text["node"][-3000:]}'
+    both = f'{text["example"]}\n--- node ---\n{text["node"][-3000:]}'
+    assert example.returncode == 0, both
     lines = [line for line in text['example'].splitlines() if ' of entity ' in line]
     kinds = {line.split(': ', 1)[1].split()[0] for line in lines}
-    assert {'head', 'hand', 'foot'} <= kinds, text['example']
+    assert {'head', 'hand', 'foot'} <= kinds, both
     # The cloud's stamp is the bag's (sim time), its frame the depth image's.
     assert all(re.match(r'\d{10}\.\d{3} camera_color_optical_frame: ', line)
                for line in lines), lines[:3]
