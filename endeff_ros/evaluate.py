@@ -109,9 +109,10 @@ def _background_estimate() -> EstimateFn:
     """The default single-frame estimator with its own static background (one per bag, as
     the tracker has), so both estimators see the same foreground."""
     from endeff_ros.core.background import BackgroundModel
+    from endeff_ros.core.kinds import KindLabeller, person_candidates
     from endeff_ros.core.single_frame import estimate_frame
 
-    model = BackgroundModel()
+    model, labeller = BackgroundModel(), KindLabeller()
 
     def estimate(frame: RGBDFrame, params: EndeffParams | None) -> Any:
         params = params or EndeffParams()
@@ -120,7 +121,9 @@ def _background_estimate() -> EstimateFn:
         estimate = estimate_frame(frame, params, background=model)
         model.observe_color(frame.color, frame.stamp_ns)
         # Its end-effectors mark the entities of the start, as the tracker's tracks do.
-        model.mark(estimate.positions(), frame.intrinsics, params.pixel_stride)
+        person = (None if params.background_keep_furniture
+                  else person_candidates(estimate, frame.intrinsics, labeller))
+        model.mark(estimate.positions(), frame.intrinsics, params.pixel_stride, person)
         return estimate
 
     return estimate

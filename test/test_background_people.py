@@ -1,13 +1,16 @@
 """The static background never hides a person (core/background.py, ``background_keep_initial``):
 people in view from the first frame who keep still, slowly moving people, people who stand
-still for minutes, and what that costs (a chair in view from the start stays) with the
-empty-room learning that removes it.
+still for minutes; what that costs (a chair in view from the start stays) with the empty-room
+learning that removes it, and the person tests that remove it (``background_keep_furniture``
+false).
 
 The painted scenes of test_background.py. Long runs are played at 5 Hz or 2 Hz (stamps
 0.2 or 0.5 s apart): the background's clocks run on stamps, so two minutes cost 240 frames.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 from test_background import (
@@ -24,6 +27,7 @@ from test_background import (
 )
 
 from endeff_ros.core.background import BackgroundModel
+from endeff_ros.core.kinds import KindLabeller, person_candidates
 from endeff_ros.core.single_frame import estimate_frame
 from endeff_ros.core.tracker import Tracker
 from endeff_ros.core.types import KINECT_640 as K
@@ -134,9 +138,22 @@ def test_a_still_person_who_leaves_leaves_nothing_behind():
     assert not result.tracks
 
 
-def test_a_chair_in_view_from_the_start_stays_and_learning_the_empty_room_removes_it():
-    """People win: the chair's legs are end-effectors while the background learns, so it
-    stays as a person would (the wall, with none, goes). Learning the room while it is empty
+def test_without_kept_furniture_the_chair_goes_and_the_still_person_beside_it_stays():
+    """``background_keep_furniture`` false: the chair's legs on the floor fail the person
+    tests (core/kinds.py), so it is learnt as background although its legs are end-effectors
+    while the background learns; the person standing still beside it from the first frame is
+    kept."""
+    tracker = Tracker(replace(PARAMS, background_keep_furniture=False))
+    for k in range(20):
+        result = tracker.update(noisy(k, still_scene(chair=True)))
+        assert points_near(result.estimate.points, PERSON_X, PERSON_Z) > 300
+    assert points_near(result.estimate.points, CHAIR_X, CHAIR_Z) == 0
+    assert on_person(result.tracks)
+
+
+def test_kept_furniture_stays_until_the_empty_room_is_learnt():
+    """``background_keep_furniture`` (the default): the chair in view from the start stays
+    as a person would (the wall, with no end-effector, goes). Learning the room while it is empty
     (``reset(empty=True)``, the ``learn_empty_background`` service) removes it, and a person
     who then walks in and stands still stays."""
     tracker = Tracker(PARAMS)
@@ -156,17 +173,21 @@ def test_a_chair_in_view_from_the_start_stays_and_learning_the_empty_room_remove
 
 
 def test_the_single_frame_estimator_marks_with_its_own_end_effectors():
-    """Without a tracker, :meth:`BackgroundModel.mark` with the frame's end-effectors keeps
-    the still person as the tracker's tracks do; unmarked, they are dropped."""
-    def run(mark: bool) -> list[int]:
-        model, found = BackgroundModel(), []
+    """Without a tracker, :meth:`BackgroundModel.mark` with the frame's end-effectors that may
+    be a person's (:func:`person_candidates`) keeps the still person as the tracker's tracks
+    do and drops the chair; unmarked, both are dropped."""
+    def run(mark: bool) -> tuple[list[int], int]:
+        model, labeller, found = BackgroundModel(), KindLabeller(), []
         for k in range(15):
-            f = noisy(k, still_scene())
+            f = noisy(k, still_scene(chair=True))
             est = estimate_frame(f, PARAMS, background=model)
             if mark:
-                model.mark(est.positions(), K, PARAMS.pixel_stride)
+                model.mark(est.positions(), K, PARAMS.pixel_stride,
+                           person_candidates(est, K, labeller))
             found.append(points_near(est.points, PERSON_X, PERSON_Z))
-        return found
+        return found, points_near(est.points, CHAIR_X, CHAIR_Z)
 
-    assert min(run(True)) > 300
-    assert run(False)[-1] == 0
+    person, chair = run(True)
+    assert min(person) > 300
+    assert chair == 0
+    assert run(False)[0][-1] == 0

@@ -719,23 +719,28 @@ class BackgroundModel:
         return _enough(labels, there, total, INITIAL_FRACTION, stride)
 
     def mark(self, positions: npt.NDArray[np.float64], intrinsics: Intrinsics,
-             stride: int) -> None:
+             stride: int, person: npt.ArrayLike | None = None) -> None:
         """While the background learns after the start or a reset (``background_keep_initial``),
         mark the components of the last frame holding end-effectors at ``positions`` (N, 3)
         metres, optical frame: they stay foreground for as long as they stay where they are
         (:meth:`foreground`). What never moved and holds no end-effector (walls, table tops)
         is dropped when learning ends; a person present from the start, still or not, is not.
         The tracker marks through :meth:`protect`; a caller without tracks (the single-frame
-        estimator) calls this with its end-effectors."""
+        estimator) calls this with its end-effectors. ``person`` (aligned with
+        ``positions``; None: all): the end-effectors that may belong to a person
+        (:func:`.kinds.may_be_person`); only their components are marked, so furniture by the
+        person tests is learnt as background."""
         if not (self._bg is not None and self._marking and self.learning):
             return
-        self._hits(positions, intrinsics, stride)
+        self._hits(positions, intrinsics, stride, person)
 
-    def _hits(self, positions: npt.NDArray[np.float64], intrinsics: Intrinsics, stride: int
+    def _hits(self, positions: npt.NDArray[np.float64], intrinsics: Intrinsics, stride: int,
+              person: npt.ArrayLike | None = None
               ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.int64], npt.NDArray[np.int32]]:
         """Where ``positions`` project on the strided image (usable ones: ``ok``, their
         pixels ``uv``) and the component each lies on (``hit``, 0: none); the components hit
-        restart their absorption clock and, while marking, are marked."""
+        restart their absorption clock and, while marking, the components of the positions
+        flagged ``person`` (aligned with ``positions``; None: all) are marked."""
         labels = self._labels
         pts = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
         with np.errstate(divide='ignore', invalid='ignore'):
@@ -752,6 +757,11 @@ class BackgroundModel:
             held = np.take(on_track, labels)
             self._near_since[held] = self._t
             if self._marking and self.learning and self._last is not None:
+                if person is not None:
+                    flags = np.asarray(person, dtype=bool).reshape(-1)[ok]
+                    on_track[:] = False
+                    on_track[hit[(hit > 0) & flags]] = True
+                    held = np.take(on_track, labels)
                 mark = held & (self._init_z == 0) & (self._last.depth > 0)
                 self._init_z[mark] = self._last.depth[mark]
         return ok, uv, hit
@@ -768,7 +778,8 @@ class BackgroundModel:
 
     def protect(self, positions: npt.NDArray[np.float64], ids: list[int],
                 intrinsics: Intrinsics, stride: int,
-                detected: npt.ArrayLike | None = None) -> None:
+                detected: npt.ArrayLike | None = None,
+                person: npt.ArrayLike | None = None) -> None:
         """Tell the model where the tracks are: ``positions`` (N, 3) metres, optical frame,
         the surface anchors of the tracks with ``ids`` after the last frame. Their
         components restart the absorption clock (a tracked person standing still is not
@@ -782,10 +793,11 @@ class BackgroundModel:
         where its end-effector might be, and as the end leaves it (a raised hand leaving the
         image) the anchor's window falls on the wall behind, which it would keep as an entity
         for as long as the prediction lives. ``stride``: the pixel stride the last frame was
-        labelled at."""
+        labelled at. While learning after the start or a reset, the components of the tracks
+        flagged ``person`` (None: all) are marked as entities of the start (:meth:`mark`)."""
         if self._labels is None or self._bg is None:
             return
-        ok, uv, hit = self._hits(positions, intrinsics, stride)
+        ok, uv, hit = self._hits(positions, intrinsics, stride, person)
         track_ids = np.asarray(ids, dtype=np.int64).reshape(-1)[ok]
         seen = (np.ones(len(ok), bool) if detected is None
                 else np.asarray(detected, dtype=bool).reshape(-1))[ok]

@@ -216,6 +216,39 @@ def frame_kinds(positions: npt.NDArray[np.float64], geodesics: npt.NDArray[np.fl
     return kinds
 
 
+def may_be_person(kind: int, shape: EntityShape | None) -> bool:
+    """Whether an end of ``kind`` on an entity of ``shape`` may belong to a person, for the
+    static background, which keeps the entities of the start that may be people
+    (``background_keep_initial``): an end of a person-like entity (``kind`` not 0), or any end
+    of an entity lower than :data:`PERSON_LOW_SPAN` (a person lying on the floor or crawling
+    fails the person tests, and nothing tells it from a low box: people win), or of one whose
+    shape is not known. What is left is furniture by the tests: at least
+    :data:`PERSON_LOW_SPAN` tall, with four legs on the floor, or fewer than
+    :data:`MIN_PERSON_ENDS` ends."""
+    if kind != Track.KIND_OTHER or shape is None:
+        return True
+    return shape.top - shape.bottom < PERSON_LOW_SPAN
+
+
+def person_candidates(estimate: FrameEstimate, intrinsics: Intrinsics | None = None,
+                      labeller: KindLabeller | None = None) -> npt.NDArray[np.bool_]:
+    """Per candidate of ``estimate`` (in :meth:`FrameEstimate.positions` order): whether it
+    may belong to a person (:func:`may_be_person`) by this frame alone, for a caller without
+    tracks (the single-frame estimator); ``labeller`` keeps the last floor seen."""
+    labeller = labeller or KindLabeller()
+    labeller.see_floor(estimate.floor)
+    shapes = entity_shapes(estimate, labeller.up, labeller.floor_offset, intrinsics)
+    rows = [(c.position, c.geodesic, e.entity) for e in estimate.entities for c in e.candidates]
+    if not rows:
+        return np.zeros(0, dtype=bool)
+    kinds = frame_kinds(np.array([r[0] for r in rows], dtype=np.float64),
+                        np.array([r[1] for r in rows], dtype=np.float64),
+                        np.array([r[2] for r in rows], dtype=np.intp), shapes,
+                        labeller.up, labeller.floor_offset)
+    return np.array([may_be_person(max(int(k), 0), shapes.get(int(r[2])))
+                     for k, r in zip(kinds, rows)], dtype=bool)
+
+
 def _head_like(rise: npt.NDArray[np.float64],
                geodesic: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
     """Ends that may be a head: between :data:`HEAD_MIN_RISE` and :data:`HEAD_MAX_RISE`
@@ -242,6 +275,7 @@ class KindLabeller:
     _frame: int = 0
     _up: npt.NDArray[np.float64] = field(default_factory=lambda: _CAMERA_UP.copy())
     _offset: float | None = None
+    _shapes: dict[int, EntityShape] = field(default_factory=dict)
 
     def label(self, tracks: Sequence[Track], estimate: FrameEstimate,
               intrinsics: Intrinsics | None = None) -> list[Track]:
@@ -250,6 +284,7 @@ class KindLabeller:
         lower border)."""
         self.see_floor(estimate.floor)
         shapes = entity_shapes(estimate, self._up, self._offset, intrinsics)
+        self._shapes = shapes
         return self.label_shapes(tracks, shapes)
 
     def label_shapes(self, tracks: Sequence[Track],
@@ -280,6 +315,11 @@ class KindLabeller:
             self._votes = {i: v for i, v in self._votes.items()
                            if self._frame - v.last <= FORGET_FRAMES}
         return out
+
+    def may_be_people(self, tracks: Sequence[Track]) -> list[bool]:
+        """Per track labelled by the last :meth:`label` call: whether its entity may be a
+        person (:func:`may_be_person`)."""
+        return [may_be_person(t.kind, self._shapes.get(t.entity)) for t in tracks]
 
     def see_floor(self, floor: FloorPlane | None) -> None:
         """Take the up direction and floor offset from ``floor`` (None: keep the last)."""

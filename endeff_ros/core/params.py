@@ -80,9 +80,15 @@ class EndeffParams:
                                        'learns (after the start or a reset) and holds an '
                                        'end-effector stays foreground for as long as it stays '
                                        'where it was, so a person who is already in view and '
-                                       'keeps still is never hidden; furniture with end-effectors '
-                                       'in view then stays too (false: the background drops it '
-                                       'with what never moved, still people included).')
+                                       'keeps still is never hidden (false: the background drops '
+                                       'it with what never moved, still people included).')
+    background_keep_furniture: bool = _p(True, 'Static background: with '
+                                         'background_keep_initial, also keep what the person '
+                                         'tests call furniture (0.5 m or taller, with legs on '
+                                         'the floor or fewer than three ends). false: what fails '
+                                         'those tests is learnt as background, and so is a still '
+                                         'person who fails them in every learning frame '
+                                         '(crawling, half hidden behind a table, walking in).')
     background_learn_s: float = _p(0.2, 'Static background: learning time after the start, a '
                                    'reset or a camera motion, during which nothing is removed.',
                                    unit='s', lo=0.0, hi=60.0)

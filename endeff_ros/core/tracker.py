@@ -285,12 +285,15 @@ class Tracker:
         self._smooth(frame.stamp_ns)
         stages['update'] = (time.perf_counter() - t0) * 1e3
         self._prev = frame
-        if self.params.background:  # tracked entities are never absorbed by the background
-            self.background.protect(self._anchors(), [t.id for t in self._tracks],
-                                    frame.intrinsics, self.params.pixel_stride,
-                                    detected=[t.detected for t in self._tracks])
         tracks = self.kinds.label([self._publish(t) for t in self._tracks], estimate,
                                   frame.intrinsics)
+        if self.params.background:  # tracked entities are never absorbed by the background
+            person = (None if self.params.background_keep_furniture
+                      else self.kinds.may_be_people(tracks))
+            self.background.protect(self._anchors(), [t.id for t in self._tracks],
+                                    frame.intrinsics, self.params.pixel_stride,
+                                    detected=[t.detected for t in self._tracks],
+                                    person=person)
         return TrackerResult(frame.stamp_ns, frame.frame_id, tracks, estimate, stages)
 
     # -- predict (Section 5.1) ---------------------------------------------------------------
