@@ -648,7 +648,7 @@ class BackgroundModel:
                                    cv2.MORPH_OPEN,
                                    np.ones((3, 3), np.uint8)).view(bool)
         moving = _enough(labels, changed, total, MIN_CHANGED_FRACTION, stride)
-        initial = self._initial_labels(d, labels, total, margin, adopt, stride)
+        initial, there = self._initial_labels(d, labels, total, margin, adopt, stride)
         # Components with changed pixels renew the hold (below); one that moves by colour
         # alone only on the surface that also stirred within COLOR_CONFIRM_S.
         renew = np.take(moving, labels)  # moving[labels], 2-3x faster
@@ -697,7 +697,11 @@ class BackgroundModel:
             self._static_since[near & margin_ok] = t
             gone |= near & ~margin_ok
         self._static_z[gone] = 0
-        static = (self._static_z > 0) & margin_ok & (t - self._static_since >= STATIC_S)
+        # An entity of the start at its marked depth is never certified static: a still
+        # person's pixels drop out of the kept set now and then (noise, dropouts, a limb
+        # split off for a frame), and certified they would be cut from the person for good.
+        static = ((self._static_z > 0) & margin_ok & (t - self._static_since >= STATIC_S)
+                  & ~there)
         out = (fg & ~(static & ~changed)) | (edge & changed)
         out = _with_feet(out, d, low, candidate, far_side, stride)
         if low is not None:
@@ -707,16 +711,18 @@ class BackgroundModel:
 
     def _initial_labels(self, d: npt.NDArray[np.float32], labels: npt.NDArray[np.int32],
                         total: npt.NDArray[np.int64], margin: npt.NDArray[np.float32],
-                        adopt: npt.NDArray[np.bool_], stride: int) -> npt.NDArray[np.bool_]:
+                        adopt: npt.NDArray[np.bool_], stride: int
+                        ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
         """Per label, whether it is an entity of the start that stays where it was
-        (``INITIAL_FRACTION`` of its pixels at their marked depth). A marked pixel whose
-        farther reading the background adopted is forgotten: what was there has left."""
+        (``INITIAL_FRACTION`` of its pixels at their marked depth), and per pixel whether it
+        is marked and at that depth. A marked pixel whose farther reading the background
+        adopted is forgotten: what was there has left."""
         marked = self._init_z > 0
         if not marked.any():
-            return np.zeros(len(total), bool)
+            return np.zeros(len(total), bool), marked
         self._init_z[marked & adopt] = 0
         there = marked & (np.abs(d - self._init_z) <= margin)
-        return _enough(labels, there, total, INITIAL_FRACTION, stride)
+        return _enough(labels, there, total, INITIAL_FRACTION, stride), there
 
     def mark(self, positions: npt.NDArray[np.float64], intrinsics: Intrinsics,
              stride: int, person: npt.ArrayLike | None = None) -> None:
