@@ -1,7 +1,7 @@
 """Ids that hold: an end-effector lost for longer than the tracker keeps a track alive on its
 prediction (T frames) takes its id back when found again where it was, or farther on when its
-geodesic distance to the root says it is the same limb; never another end's id, and no id is
-given twice."""
+geodesic distance to the root, its kind and its direction from the root say it is the same
+limb; never another end's id, and no id is given twice."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ import scenarios as sc
 
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.tracker import Tracker, _Lost
+from endeff_ros.core.types import Track
 
 TOL = 0.15
 
@@ -125,3 +126,36 @@ def test_two_lost_hands_found_again_are_not_merged():
     assert got == [b, a]  # 0.4 is 0.2 from b; 0.15 is 0.15 from a
     (a, b), got = _lost_and_found([(0.0, 0.8), (0.6, 0.8)], [(0.45, 0.8), (0.5, 0.8)])
     assert len(set(got)) == 2 and b in got  # one takes b (0.1 m), the other a (0.45 m)
+
+
+def _revived(lost: _Lost, found: np.ndarray, geodesic: float, kind: int,
+             root: np.ndarray) -> int:
+    """The id a tracker that has just lost ``lost`` (id 100) gives a new end at ``found``
+    with this geodesic distance and frame kind, in an entity whose root is at ``root``."""
+    tracker = Tracker(EndeffParams())
+    tracker._frame = 1
+    tracker._lost = [lost]
+    tracker._next_id = 200
+    return tracker._revived_ids([found], [geodesic], [kind], [found - root])[0]
+
+
+def test_a_lost_hand_is_not_revived_onto_a_foot():
+    """A hand (geodesic distance 0.75 m) lost beside the hip, 0.35 m out to the side of the
+    root (camera frame, y down): a foot found 0.78 m away with a geodesic distance within
+    ``revive_geodesic_tolerance`` (0.9 m) leaves the root downwards, and gets a new id; the
+    hand found 0.47 m on, raised out to the same side, takes its id back. A lost head gives
+    its id to no end beyond ``revive_distance``, and no end this frame calls a head takes
+    a lost hand's id from there."""
+    root = np.array([0.0, 0.0, 2.5])
+    seen = root + [0.35, 0.1, 0.0]
+    hand = _Lost(100, seen, 1, seen, 0.75, Track.KIND_HAND, seen - root)
+    foot = root + [0.15, 0.85, 0.0]
+    assert 0.3 < np.linalg.norm(foot - seen) < 0.8
+    assert _revived(hand, foot, 0.9, Track.KIND_FOOT, root) == 200
+    raised = root + [0.6, -0.3, 0.0]
+    assert 0.3 < np.linalg.norm(raised - seen) < 0.8
+    assert _revived(hand, raised, 0.8, Track.KIND_HAND, root) == 100
+    assert _revived(hand, raised, 0.8, Track.KIND_HEAD, root) == 200
+    head = _Lost(100, seen, 1, seen, 0.75, Track.KIND_HEAD, seen - root)
+    assert _revived(head, raised, 0.8, Track.KIND_HAND, root) == 200
+    assert _revived(head, seen + [0.1, -0.1, 0.0], 0.8, Track.KIND_HAND, root) == 100

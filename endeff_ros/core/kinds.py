@@ -281,6 +281,12 @@ class KindLabeller:
                            if self._frame - v.last <= FORGET_FRAMES}
         return out
 
+    def kind_of(self, track_id: int) -> int:
+        """The kind last published for track ``track_id`` (``Track.KIND_OTHER`` for one
+        without votes)."""
+        v = self._votes.get(track_id)
+        return int(np.argmax(v.score)) if v is not None else Track.KIND_OTHER
+
     def see_floor(self, floor: FloorPlane | None) -> None:
         """Take the up direction and floor offset from ``floor`` (None: keep the last)."""
         if floor is not None:
