@@ -321,6 +321,12 @@ class KindLabeller:
         person (:func:`may_be_person`)."""
         return [may_be_person(t.kind, self._shapes.get(t.entity)) for t in tracks]
 
+    def kind_of(self, track_id: int) -> int:
+        """The kind last published for track ``track_id`` (``Track.KIND_OTHER`` for one
+        without votes)."""
+        v = self._votes.get(track_id)
+        return int(np.argmax(v.score)) if v is not None else Track.KIND_OTHER
+
     def see_floor(self, floor: FloorPlane | None) -> None:
         """Take the up direction and floor offset from ``floor`` (None: keep the last)."""
         if floor is not None:

@@ -238,6 +238,25 @@ class EndeffParams:
                                 lo=0.0, hi=5.0)
     revive_frames: int = _p(30, 'A track dropped at most this many frames ago gives its id back '
                             '(revive_distance).', lo=0, hi=10000)
+    # A fast end (a foot in a cartwheel, a kick) is often found again farther than
+    # revive_distance from where it was lost; its geodesic distance to the root, its kind and
+    # its direction from the root tell its limb. Quick mocap dev split (python -m
+    # tools.id_switches): 0.3 m alone 103 switches, 0.6 m alone 80 (more ids back, more of
+    # them to another end), 0.3 m plus 0.8 m within 0.3 m of geodesic distance 73 but swaps
+    # between limbs 13 -> 15; with no head and the same direction from the root as well 81 and
+    # 13 swaps (Tracker._revived_ids; docs/design.md, "An id comes back").
+    revive_far_distance: float = _p(0.8, 'A new end-effector farther than revive_distance but '
+                                    'within this distance of where a track was lost takes its '
+                                    'id back only if its geodesic distance to the root (Eq. 7) '
+                                    'is within revive_geodesic_tolerance of the one the track '
+                                    'memorised (Eq. 8), it leaves the root the same way and '
+                                    'neither is a head: the same limb found again after a fast '
+                                    'move (0: off).', unit='m', lo=0.0, hi=5.0)
+    revive_geodesic_tolerance: float = _p(0.3, 'Largest difference between the geodesic '
+                                          'distance to the root of a new end-effector and of '
+                                          'a lost track for the id to come back from beyond '
+                                          'revive_distance (revive_far_distance).', unit='m',
+                                          lo=0.0, hi=5.0)
     # Published positions: One Euro filter along each track (Casiez et al. 2012; names as
     # the paper's), the velocity from it (core/smoothing.py).
     smoothing: bool = _p(True, 'Publish the position of each track filtered along it (One '

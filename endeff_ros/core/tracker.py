@@ -41,7 +41,8 @@ Each track has a stable id, its entity, age, state (detected / predicted) and a 
 Its published position is filtered along the track (One Euro, :mod:`.smoothing`), which also
 gives its velocity; the tracker itself follows the raw positions, so the filter's lag never
 enters the matching. A track dropped within ``revive_frames`` gives its id back to a new track
-found where it was (:meth:`Tracker._revived_ids`).
+found where it was, or farther on where the same limb is found again
+(:meth:`Tracker._revived_ids`).
 """
 
 from __future__ import annotations
@@ -63,7 +64,7 @@ from .graph import (
     distance_to_path,
     path_to_sources,
 )
-from .kinds import KindLabeller
+from .kinds import KindLabeller, entity_shapes, frame_kinds
 from .nearest import nearest_point
 from .params import EndeffParams
 from .readable import ReadableArea
@@ -112,6 +113,10 @@ CASE_B_HOLD_FACTOR = 2
 #: held longer is an end-effector its memory kept against the candidates (a fist resting on
 #: the chest, Fig. 7b), and a candidate beside it is then another end (the other fist).
 RESUME_MAX_HELD = 2
+#: A new end-effector beyond ``revive_distance`` takes a lost track's id back only if it
+#: points from its entity's root the same way as the lost track did (cosine of the two
+#: offsets from the root at least this; :meth:`Tracker._revived_ids`).
+REVIVE_FAR_MIN_COSINE = 0.5
 
 
 def _nearest_pairs(d: npt.NDArray[np.float64], radius: float,
@@ -136,12 +141,17 @@ def _nearest_pairs(d: npt.NDArray[np.float64], radius: float,
 
 class _Lost(NamedTuple):
     """A track dropped in update number ``frame``, last predicted at ``position`` and last
-    kept at ``seen`` (where it was before the frame that dropped it)."""
+    kept at ``seen`` (where it was before the frame that dropped it), with its memorised
+    geodesic distance to the root (Eq. 8) then, its published kind (``Track.kind``) and
+    ``offset``, from its entity's root to ``seen`` (None: not known)."""
 
     id: int
     position: npt.NDArray[np.float64]
     frame: int
     seen: npt.NDArray[np.float64]
+    geodesic: float
+    kind: int = Track.KIND_OTHER
+    offset: npt.NDArray[np.float64] | None = None
 
 
 @dataclass
@@ -210,6 +220,8 @@ class Tracker:
         self._relearns = self.background.relearns  # camera motions seen (the floor is refitted)
         self._frame = 0  # updates since the reset
         self._lost: list[_Lost] = []  # tracks dropped lately
+        self._roots: dict[int, npt.NDArray[np.float64]] = {}  # last update's entity roots
+        self._intrinsics: Intrinsics | None = None  # last frame's (the kinds of new ends)
 
     def reset_background(self, *, empty: bool = False) -> None:
         """Re-learn the static background and fit the floor anew from the next frame (the
@@ -276,6 +288,7 @@ class Tracker:
             self._relearns = self.background.relearns
             self._refit_floor()
         stages = dict(estimate.stage_ms)
+        self._intrinsics = frame.intrinsics
         t0 = time.perf_counter()
         predicted = self._predict(frame, flow)
         stages['predict'] = (time.perf_counter() - t0) * 1e3
@@ -495,14 +508,23 @@ class Tracker:
                 # (a one-off candidate is not kept alive).
                 if (pr.node < 0 or track.missed + 1 > min(p.keep_frames, track.hits)
                         or track.hits < p.confirm_hits):
-                    self._lost.append(_Lost(track.id, pr.position, self._frame,
-                                            track.position.copy()))
+                    root = self._roots.get(track.entity)
+                    self._lost.append(_Lost(
+                        track.id, pr.position, self._frame, track.position.copy(),
+                        track.geodesic, self.kinds.kind_of(track.id),
+                        None if root is None else track.position - root))
                     continue
                 self._take_prediction(track, pr, pred_geo, missed=True)
                 survivors.append(track)
         new = [j for j in range(len(cands)) if j not in used_cands and not loop_side[j]]
         new = self._resume_predicted(survivors, new, cands, cand_entity)
-        ids = self._revived_ids([cands[j].end_centre for j in new])
+        far = self._lost and new and self.params.revive_far_distance > 0
+        roots = {e.entity: np.asarray(e.root, dtype=np.float64) for e in estimate.entities}
+        ids = self._revived_ids(
+            [cands[j].end_centre for j in new], [cands[j].geodesic_approx for j in new],
+            self._candidate_kinds(estimate, [cands[j] for j in new]) if far else None,
+            [cands[j].end_centre - roots[cand_entity[j]] for j in new])
+        self._roots = roots
         for j, track_id in zip(new, ids):
             cand = cands[j]
             survivors.append(_TrackState(
@@ -551,31 +573,85 @@ class Tracker:
         taken = {i for i, _ in pairs}
         return [j for i, j in enumerate(new) if i not in taken]
 
-    def _revived_ids(self, positions: list[npt.NDArray[np.float64]]) -> list[int]:
-        """Ids for new tracks at ``positions``. A track dropped within the last
+    def _candidate_kinds(self, estimate: FrameEstimate, new: list[Candidate]) -> list[int]:
+        """The kind this frame gives each candidate of ``new`` (:func:`.kinds.frame_kinds`
+        over all the frame's candidates, with no vote history; -1: none)."""
+        listed = [(c, e.entity) for e in estimate.entities for c in e.candidates]
+        if not listed:
+            return [-1] * len(new)
+        self.kinds.see_floor(estimate.floor)
+        up, offset = self.kinds.up, self.kinds.floor_offset
+        kinds = frame_kinds(np.array([c.position for c, _ in listed]),
+                            np.array([c.geodesic_approx for c, _ in listed]),
+                            np.array([e for _, e in listed], dtype=np.intp),
+                            entity_shapes(estimate, up, offset, self._intrinsics), up, offset)
+        index = {id(c): k for k, (c, _) in enumerate(listed)}
+        return [int(kinds[index[id(c)]]) if id(c) in index else -1 for c in new]
+
+    def _revived_ids(self, positions: list[npt.NDArray[np.float64]],
+                     geodesics: list[float] | None = None, kinds: list[int] | None = None,
+                     offsets: list[npt.NDArray[np.float64]] | None = None) -> list[int]:
+        """Ids for new tracks at ``positions`` (with their geodesic distances to the root,
+        Eq. 7, ``geodesics``, the kinds this frame gives them, ``kinds``, and their offsets
+        from their entity's root, ``offsets``). A track dropped within the last
         ``revive_frames`` frames gives its id back to the nearest new track within
         ``revive_distance`` of where it was last predicted or last kept (nearest pairs
         first): the same end-effector found again after a loss (a hand that was no extremum
         for a few frames, a foot hidden behind the other leg for half a second, a foot lost
-        while the camera turns) keeps its id for a subscriber. So does one too young to have
-        been kept alive (``confirm_hits``): an end that is an extreme in a frame or two at a
-        time would otherwise get a new id each time. Where it was kept counts as well as its
-        last prediction because a track is mostly dropped when that prediction left the
-        foreground (the flow lost the part), so the prediction is the wrong place to look
-        for it. The window is longer than T (case C keeps a track alive on its prediction,
-        which costs false positives; remembering an id costs nothing): most of the ends
-        found again under a new id on the dev split had been lost for 4 frames or more.
-        Otherwise a new id, never used before."""
+        while the camera turns) keeps its id for a subscriber. So does one too young to
+        have been kept alive (``confirm_hits``): an end that is an extreme in a frame or
+        two at a time would otherwise get a new id each time. Where it was kept counts as
+        well as its last prediction because a track is mostly dropped when that prediction
+        left the foreground (the flow lost the part), so the prediction is the wrong place
+        to look for it. The window is longer than T (case C keeps a track alive on its
+        prediction, which costs false positives; remembering an id costs nothing): most of
+        the ends found again under a new id on the dev split had been lost for 4 frames or
+        more.
+
+        Beyond ``revive_distance``, up to ``revive_far_distance``, the id comes back only to
+        a new track on the same limb: a foot lost in a cartwheel or a kick is found again
+        0.3-0.8 m on, and at that distance the nearest new end is as often another limb's.
+        Three tests, each for a way the wrong limb was taken: the geodesic distance to the
+        root within ``revive_geodesic_tolerance`` of the lost track's memory (a head or a
+        knee where a hand was lost); neither the lost track (its published kind) nor the new
+        end (the kind this frame gives it) a head, which moves with the trunk and is never
+        the fast end, while a head-like end far from a lost one is a raised hand or a kicking
+        foot; and both pointing the same way from their entity's root
+        (:data:`REVIVE_FAR_MIN_COSINE`: a hand and a foot have similar geodesic distances but
+        leave the root up and down). Quick mocap dev split (ids replayed over one run):
+        103 id switches with ``revive_distance`` alone, 73 with the geodesic test alone but
+        swaps between limbs 13 -> 15 (11 of 38 checkable far revivals to another end), 81
+        with all three and 13 swaps (5 of 26); the lost and new kinds asked to agree for
+        hands and feet too cost 2 more switches (an acrobat's raised feet are labelled
+        hands) for no fewer swaps (docs/design.md, "An id comes back"). Otherwise a new id,
+        never used before."""
         p = self.params
         self._lost = [lost for lost in self._lost if self._frame - lost.frame <= p.revive_frames]
         ids: list[int | None] = [None] * len(positions)
-        if self._lost and positions:
+        if self._lost and positions and p.revive_distance > 0:
             new = np.array(positions)[:, None]
             d = np.minimum(
                 np.linalg.norm(new - np.array([lost.position for lost in self._lost])[None],
                                axis=2),
                 np.linalg.norm(new - np.array([lost.seen for lost in self._lost])[None], axis=2))
-            pairs = _nearest_pairs(d, p.revive_distance)
+            if geodesics is None:
+                same_limb = np.zeros(d.shape, dtype=bool)
+            else:
+                same_limb = (np.abs(np.asarray(geodesics, dtype=np.float64)[:, None]
+                                    - np.array([lost.geodesic for lost in self._lost])[None])
+                             <= p.revive_geodesic_tolerance)
+                same_limb &= np.array([lost.kind != Track.KIND_HEAD for lost in self._lost])[None]
+                if kinds is not None:
+                    same_limb &= np.asarray(kinds)[:, None] != Track.KIND_HEAD
+                if offsets is not None:
+                    for i, k in zip(*np.nonzero(same_limb)):
+                        a, b = offsets[i], self._lost[k].offset
+                        if b is not None and (a @ b < REVIVE_FAR_MIN_COSINE * np.linalg.norm(a)
+                                              * np.linalg.norm(b)):
+                            same_limb[i, k] = False
+            pairs = _nearest_pairs(
+                d, max(p.revive_distance, p.revive_far_distance),
+                lambda i, k: bool(d[i, k] < p.revive_distance or same_limb[i, k]))
             for i, k in pairs:
                 ids[i] = self._lost[k].id
             taken = {k for _, k in pairs}
