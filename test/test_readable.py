@@ -104,3 +104,25 @@ def _cut_person(cut: bool) -> list[float]:
 def test_a_body_cut_by_the_bottom_margin_has_no_end_there():
     assert min(_cut_person(False)) < 60  # the cut legs' ends, above the margin's edge
     assert min(_cut_person(True)) > 60
+
+
+def test_the_edges_are_fitted_again_only_when_a_sides_profile_moves(monkeypatch):
+    """A pixel beyond range read for the first time inside the area (a person walking in
+    front of it) leaves every edge profile, and so the fit, as it was; one read inside the
+    margin moves a profile and the edges are fitted again."""
+    import endeff_ros.core.readable as readable
+
+    fits = []
+    fit = readable.fit_edges
+    monkeypatch.setattr(readable, 'fit_edges', lambda *a, **k: fits.append(1) or fit(*a, **k))
+    scene = kinect_margins(room())
+    scene[200:260, 300:340] = np.nan  # a hole beyond range in the middle of the image
+    area = ReadableArea()
+    first = area.update(scene, STRIDE, 3)
+    inside = scene.copy()
+    inside[200:260, 300:340] = 2.0  # a person in front of it
+    assert area.update(inside, STRIDE, 3) is first and len(fits) == 1
+    margin = inside.copy()
+    margin[100:140, 10:41] = 2.0  # readings inside the left band
+    moved = area.update(margin, STRIDE, 3)
+    assert moved is not first and len(fits) == 2
