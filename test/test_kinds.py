@@ -72,6 +72,16 @@ def test_a_person_cut_at_the_waist_by_the_image_has_a_head_and_hands():
     assert _kinds(ends, close._replace(cut=False)) == [OTHER] * 3
 
 
+def test_a_cut_body_whose_root_lies_at_the_thighs_still_has_a_head():
+    """A person filling the image, cut by its lower border: the graph's root lands on the
+    thighs, 1.5 m below the head, beyond the rise a standing person's head has; the head
+    still goes straight up from it and is a head. Not cut, the same rise is a raised hand."""
+    close = EntityShape(root_height=0.1, bottom=-0.2, top=1.7, on_floor=True, cut=True)
+    ends = [(_at(0.0, 1.62, 1.0), 1.6), (_at(-0.4, 0.9, 0.9), 1.3), (_at(0.4, 0.8, 0.9), 1.4)]
+    assert _kinds(ends, close) == [HEAD, HAND, HAND]
+    assert _kinds(ends, close._replace(cut=False))[0] != HEAD
+
+
 def test_legs_below_an_image_cutting_off_the_head_are_feet():
     legs = EntityShape(root_height=0.9, bottom=0.02, top=1.0, on_floor=True, cut_top=True)
     ends = [(_at(-0.15, 0.08), 1.0), (_at(0.15, 0.08), 1.0)]

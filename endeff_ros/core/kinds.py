@@ -22,8 +22,9 @@ entity gets an answer, and for one that is not person-like the answer is 0 (othe
   :data:`HEAD_MIN_RISE` to :data:`HEAD_MAX_RISE` m above it whose geodesic length exceeds
   their rise by at most :data:`HEAD_MAX_DETOUR`, the one with the smallest excess. A head
   sits straight above the trunk; a hand raised as high has come up the arm (it rises more and
-  its path is longer); one in front of the chest rises little for its length. At most one
-  per entity, and none when no end qualifies (a head hidden behind a raised arm).
+  its path is longer); one in front of the chest rises little for its length. On a body cut
+  by the image's lower border the rise has no upper bound: its root may lie at the thighs.
+  At most one per entity, and none when no end qualifies (a head hidden behind a raised arm).
 - **Hands** are the other ends of a person-like entity.
 - **History**: a track's kind is the one with the most votes over its recent frames (each
   frame's vote decays by :data:`VOTE_DECAY`), so a foot raised for a kick, a head lost behind a
@@ -205,12 +206,12 @@ def frame_kinds(positions: npt.NDArray[np.float64], geodesics: npt.NDArray[np.fl
         # Partly in the image: the upper body above a lower border that cuts it, or the
         # legs below an upper border that cuts the head off.
         partial = span >= CUT_MIN_SPAN and len(mine) >= CUT_MIN_ENDS and (
-            (shape.cut and bool(_head_like(rise, geo).any()))
+            (shape.cut and bool(_head_like(rise, geo, cut=True).any()))
             or (shape.cut_top and grounded and 0 < floor_ends <= MAX_FLOOR_ENDS))
         if not (standing or partial or prior[mine].mean() > PERSON_MEMORY):
             continue
         kinds[mine] = np.where(low, Track.KIND_FOOT, Track.KIND_HAND)
-        upper = np.flatnonzero(~low & _head_like(rise, geo))
+        upper = np.flatnonzero(~low & _head_like(rise, geo, cut=shape.cut))
         if upper.size:
             kinds[mine[upper[np.argmin(geo[upper] - rise[upper])]]] = Track.KIND_HEAD
     return kinds
@@ -249,13 +250,15 @@ def person_candidates(estimate: FrameEstimate, intrinsics: Intrinsics | None = N
                      for k, r in zip(kinds, rows)], dtype=bool)
 
 
-def _head_like(rise: npt.NDArray[np.float64],
-               geodesic: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+def _head_like(rise: npt.NDArray[np.float64], geodesic: npt.NDArray[np.float64], *,
+               cut: bool = False) -> npt.NDArray[np.bool_]:
     """Ends that may be a head: between :data:`HEAD_MIN_RISE` and :data:`HEAD_MAX_RISE`
     above the root, and reached from it almost straight up (geodesic length less rise at most
-    :data:`HEAD_MAX_DETOUR`)."""
-    return ((rise >= HEAD_MIN_RISE) & (rise <= HEAD_MAX_RISE)
-            & (geodesic - rise <= HEAD_MAX_DETOUR))
+    :data:`HEAD_MAX_DETOUR`). On an entity the image's lower border cuts (``cut``) the root
+    is found wherever the cut body's graph puts it, down to the thighs, so the rise has no
+    upper bound there."""
+    top = np.inf if cut else HEAD_MAX_RISE
+    return (rise >= HEAD_MIN_RISE) & (rise <= top) & (geodesic - rise <= HEAD_MAX_DETOUR)
 
 
 @dataclass
