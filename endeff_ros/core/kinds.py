@@ -237,17 +237,11 @@ def person_candidates(estimate: FrameEstimate, intrinsics: Intrinsics | None = N
     may belong to a person (:func:`may_be_person`) by this frame alone, for a caller without
     tracks (the single-frame estimator); ``labeller`` keeps the last floor seen."""
     labeller = labeller or KindLabeller()
-    labeller.see_floor(estimate.floor)
-    shapes = entity_shapes(estimate, labeller.up, labeller.floor_offset, intrinsics)
-    rows = [(c.position, c.geodesic, e.entity) for e in estimate.entities for c in e.candidates]
-    if not rows:
-        return np.zeros(0, dtype=bool)
-    kinds = frame_kinds(np.array([r[0] for r in rows], dtype=np.float64),
-                        np.array([r[1] for r in rows], dtype=np.float64),
-                        np.array([r[2] for r in rows], dtype=np.intp), shapes,
-                        labeller.up, labeller.floor_offset)
-    return np.array([may_be_person(max(int(k), 0), shapes.get(int(r[2])))
-                     for k, r in zip(kinds, rows)], dtype=bool)
+    shapes = labeller.shapes(estimate, intrinsics)
+    entities = [e.entity for e in estimate.entities for _ in e.candidates]
+    return np.array([may_be_person(max(int(k), 0), shapes.get(e)) for k, e in
+                     zip(labeller.candidate_kinds(estimate, intrinsics, approx=False),
+                         entities)], dtype=bool)
 
 
 def _head_like(rise: npt.NDArray[np.float64], geodesic: npt.NDArray[np.float64], *,
@@ -279,16 +273,43 @@ class KindLabeller:
     _up: npt.NDArray[np.float64] = field(default_factory=lambda: _CAMERA_UP.copy())
     _offset: float | None = None
     _shapes: dict[int, EntityShape] = field(default_factory=dict)
+    _shapes_of: tuple[FrameEstimate, Intrinsics | None] | None = field(default=None,
+                                                                        repr=False)
+
+    def shapes(self, estimate: FrameEstimate,
+               intrinsics: Intrinsics | None = None) -> dict[int, EntityShape]:
+        """The :class:`EntityShape` of each entity of ``estimate``, after taking its floor
+        (:meth:`see_floor`); computed once per estimate, since the tracker asks for the kinds
+        of its new ends (:meth:`candidate_kinds`) and then labels its tracks in one frame."""
+        last = self._shapes_of
+        if last is None or last[0] is not estimate or last[1] is not intrinsics:
+            self.see_floor(estimate.floor)
+            self._shapes = entity_shapes(estimate, self._up, self._offset, intrinsics)
+            self._shapes_of = (estimate, intrinsics)
+        return self._shapes
 
     def label(self, tracks: Sequence[Track], estimate: FrameEstimate,
               intrinsics: Intrinsics | None = None) -> list[Track]:
         """``tracks`` with ``kind`` set, from ``estimate``'s floor and entities (and the
         image's size and projection, ``intrinsics``, which tell an entity cut by the image's
         lower border)."""
-        self.see_floor(estimate.floor)
-        shapes = entity_shapes(estimate, self._up, self._offset, intrinsics)
-        self._shapes = shapes
-        return self.label_shapes(tracks, shapes)
+        return self.label_shapes(tracks, self.shapes(estimate, intrinsics))
+
+    def candidate_kinds(self, estimate: FrameEstimate, intrinsics: Intrinsics | None = None,
+                        *, approx: bool = True) -> npt.NDArray[np.intp]:
+        """The kind this frame alone gives each candidate of ``estimate`` (in
+        :meth:`FrameEstimate.positions` order; no vote history; -1: none), from their Eq. 7
+        geodesic distances (``approx``: the ones tracks carry and the rules were chosen on)
+        or their Eq. 6 ones (the single-frame estimator's marks, :func:`person_candidates`)."""
+        rows = [(c.position, c.geodesic_approx if approx else c.geodesic, e.entity)
+                for e in estimate.entities for c in e.candidates]
+        if not rows:
+            return np.zeros(0, dtype=np.intp)
+        shapes = self.shapes(estimate, intrinsics)
+        return frame_kinds(np.array([r[0] for r in rows], dtype=np.float64),
+                           np.array([r[1] for r in rows], dtype=np.float64),
+                           np.array([r[2] for r in rows], dtype=np.intp), shapes,
+                           self._up, self._offset)
 
     def label_shapes(self, tracks: Sequence[Track],
                      shapes: dict[int, EntityShape]) -> list[Track]:

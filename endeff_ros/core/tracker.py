@@ -64,7 +64,7 @@ from .graph import (
     distance_to_path,
     path_to_sources,
 )
-from .kinds import KindLabeller, entity_shapes, frame_kinds
+from .kinds import KindLabeller
 from .nearest import nearest_point
 from .params import EndeffParams
 from .readable import ReadableArea
@@ -574,18 +574,11 @@ class Tracker:
         return [j for i, j in enumerate(new) if i not in taken]
 
     def _candidate_kinds(self, estimate: FrameEstimate, new: list[Candidate]) -> list[int]:
-        """The kind this frame gives each candidate of ``new`` (:func:`.kinds.frame_kinds`
-        over all the frame's candidates, with no vote history; -1: none)."""
-        listed = [(c, e.entity) for e in estimate.entities for c in e.candidates]
-        if not listed:
-            return [-1] * len(new)
-        self.kinds.see_floor(estimate.floor)
-        up, offset = self.kinds.up, self.kinds.floor_offset
-        kinds = frame_kinds(np.array([c.position for c, _ in listed]),
-                            np.array([c.geodesic_approx for c, _ in listed]),
-                            np.array([e for _, e in listed], dtype=np.intp),
-                            entity_shapes(estimate, up, offset, self._intrinsics), up, offset)
-        index = {id(c): k for k, (c, _) in enumerate(listed)}
+        """The kind this frame gives each candidate of ``new``
+        (:meth:`.kinds.KindLabeller.candidate_kinds`; -1: none)."""
+        kinds = self.kinds.candidate_kinds(estimate, self._intrinsics)
+        index = {id(c): k for k, c in enumerate(c for e in estimate.entities
+                                                for c in e.candidates)}
         return [int(kinds[index[id(c)]]) if id(c) in index else -1 for c in new]
 
     def _revived_ids(self, positions: list[npt.NDArray[np.float64]],
