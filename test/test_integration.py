@@ -2,7 +2,7 @@
 
 The node runs as a subprocess with the Fast DDS SHM profile; a driver process replays the bag
 (original stamps, jittered colour/depth send times, lock-step) and a subscriber node in it
-collects the outputs (:func:`tools.session.run_session`). Checked: one cloud per depth
+collects the outputs (:func:`tools.dds_run.run_over_dds`). Checked: one cloud per depth
 image with its stamp and frame_id, markers equal to the cloud, and recall equal (within 0.02) to
 the offline evaluation of the same bag.
 """
@@ -28,9 +28,9 @@ def bag(tmp_path_factory):
 
 @pytest.fixture(scope='module')
 def record(bag):
-    from tools.session import run_session
+    from tools.dds_run import run_over_dds
 
-    return run_session(bag, timeout_s=240.0, frame_timeout_s=20.0)
+    return run_over_dds(bag, timeout_s=240.0, frame_timeout_s=20.0)
 
 
 def _depth_frame_id(bag) -> str:
@@ -151,17 +151,17 @@ DROP_LOOPS = 4  # the quick bag 4 times over (re-stamped): 4 colour images withh
 
 @pytest.fixture(scope='module')
 def record_drop(bag):
-    from tools.session import run_session
+    from tools.dds_run import run_over_dds
 
-    return run_session(bag, loops=DROP_LOOPS, drop_color_every=DROP_EVERY, markers=False,
+    return run_over_dds(bag, loops=DROP_LOOPS, drop_color_every=DROP_EVERY, markers=False,
                        timeout_s=240.0, frame_timeout_s=20.0)
 
 
 @pytest.fixture(scope='module')
 def record_no_color(bag):
-    from tools.session import run_session
+    from tools.dds_run import run_over_dds
 
-    return run_session(bag, no_color=True, markers=False, timeout_s=240.0,
+    return run_over_dds(bag, no_color=True, markers=False, timeout_s=240.0,
                        frame_timeout_s=20.0)
 
 

@@ -1,4 +1,4 @@
-"""Replay, session and DDS-profile helpers that need no running DDS."""
+"""Replay, DDS-run and DDS-profile helpers that need no running DDS."""
 
 from __future__ import annotations
 

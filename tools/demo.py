@@ -55,13 +55,13 @@ def score_record(record: dict[str, Any], gt: dict[int, np.ndarray]) -> SequenceS
 
 def run_bag(bag: Path, *, offline: bool) -> dict[str, Any]:
     """Node over DDS (and optionally offline) on one bag -> one report row."""
+    from tools.dds_run import run_over_dds
     from tools.replay import BagSource
-    from tools.session import run_session
 
     with BagSource(bag) as source:
         gt = source.ground_truth()
     t0 = time.monotonic()
-    record = run_session(bag)
+    record = run_over_dds(bag)
     scorer = score_record(record, gt)
     clouds = record['outputs']['node']
     row: dict[str, Any] = {

@@ -67,11 +67,11 @@ def ros_latency_bench(bag: str | Path | None = None, *, rate_hz: float = 30.0,
     ``end_effectors/markers`` (as RViz would), which makes the node build them.
     ``drop_color_every=N``: withhold every N-th colour image; ``no_color``: send none.
     """
-    from tools.session import run_session
+    from tools.dds_run import run_over_dds
 
     with tempfile.TemporaryDirectory(prefix='endeff_bench_') as tmp:
         path = Path(bag) if bag is not None else _default_bag(Path(tmp))
-        record = run_session(path, rate_hz=rate_hz, relay=True, profile=profile,
+        record = run_over_dds(path, rate_hz=rate_hz, relay=True, profile=profile,
                              max_frames=max_frames, loops=loops, frame_timeout_s=5.0,
                              node_params=node_params, markers=markers,
                              drop_color_every=drop_color_every, no_color=no_color)

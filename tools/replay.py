@@ -39,7 +39,7 @@ from endeff_ros.bag.reader import BagReader, ReaderOptions
 from endeff_ros.ros import convert
 
 # spin_for and spin_until live in the package, where ``endeff play`` (the user-facing player:
-# every topic with its clock) shares them; tools.session imports them from here.
+# every topic with its clock) shares them; tools.dds_run imports them from here.
 
 KINDS = ('camera_info', 'color', 'depth')  # also the send priority at equal stamps
 TOPICS = {'color': 'color/image_raw', 'depth': 'depth/image_raw',

@@ -1,9 +1,9 @@
-"""One replay session over DDS, every participant in its own process.
+"""One replay run over DDS, every participant in its own process.
 
-``run_session(bag)`` starts ``endeff_node`` (and optionally the relay) and a driver process that
+``run_over_dds(bag)`` starts ``endeff_node`` (and optionally the relay) and a driver process that
 replays the bag (:mod:`tools.replay`) and collects the outputs, all with the same
 environment (Fast DDS, the SHM profile unless ``profile=False``, a private ROS domain). The
-driver writes a JSON record; ``run_session`` returns it as a dict::
+driver writes a JSON record; ``run_over_dds`` returns it as a dict::
 
     {'bag', 'frame_id', 'depth_sent': [stamp, ...], 'waited_out', 'replay_seconds',
      'drop_color_every', 'no_color', 'color_sent': [stamp, ...], 'color_dropped': [...],
@@ -14,7 +14,7 @@ driver writes a JSON record; ``run_session`` returns it as a dict::
      'duplicates': {'node': 0, ...}, 'markers': {stamp: [[id, x, y, z], ...]},
      'latency': {'node': {...}, 'relay': {...}}, 'diagnostics': {key: value}}
 
-Stamps are integers (nanoseconds). The driver is ``python -m tools.session``.
+Stamps are integers (nanoseconds). The driver is ``python -m tools.dds_run``.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def _node_args(namespace: str, params: dict[str, Any]) -> list[str]:
 _DEFAULT_SLOP_S = next(r['default'] for r in NODE_PARAMS if r['name'] == 'sync_slop')
 
 
-def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = False,
+def run_over_dds(bag: str | Path, *, rate_hz: float | None = None, relay: bool = False,
                 markers: bool = True,
                 profile: bool = True, node_params: dict[str, Any] | None = None,
                 namespace: str = '/camera', domain_id: int | None = None,
@@ -64,7 +64,7 @@ def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = 
     if domain_id is None:
         domain_id = 100 + os.getpid() % 100
     env = ros_env(profile=profile, domain_id=domain_id)
-    with tempfile.TemporaryDirectory(prefix='endeff_session_') as tmp:
+    with tempfile.TemporaryDirectory(prefix='endeff_dds_run_') as tmp:
         out = Path(tmp) / 'record.json'
         logs = {name: open(Path(tmp) / f'{name}.log', 'w+', encoding='utf-8')  # noqa: SIM115
                 for name in ('node', 'relay', 'driver')}
@@ -77,7 +77,7 @@ def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = 
                 procs.append(start(['-m', 'tools.relay',
                                     *_node_args(namespace, {})], env,
                                    stdout=logs['relay'], stderr=subprocess.STDOUT))
-            driver = ['-m', 'tools.session', '--bag', str(bag), '--out', str(out),
+            driver = ['-m', 'tools.dds_run', '--bag', str(bag), '--out', str(out),
                       '--namespace', namespace, '--jitter', str(jitter_s),
                       '--frame-timeout', str(frame_timeout_s),
                       '--sync-slop', str((node_params or {}).get('sync_slop', _DEFAULT_SLOP_S))]
@@ -110,7 +110,7 @@ def run_session(bag: str | Path, *, rate_hz: float | None = None, relay: bool = 
             text[name] = fh.read()[-4000:]
             fh.close()
         if not out.is_file():
-            msg = (f'replay session for {bag} produced no record.\n--- driver log ---\n'
+            msg = (f'replay run for {bag} produced no record.\n--- driver log ---\n'
                    f'{text["driver"]}\n--- node log ---\n{text["node"]}')
             raise RuntimeError(msg)
         record = json.loads(out.read_text(encoding='utf-8'))
@@ -219,7 +219,7 @@ def _driver(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     from tools.replay import positive_int
 
-    parser = argparse.ArgumentParser(description='Replay driver of run_session (internal).')
+    parser = argparse.ArgumentParser(description='Replay driver of run_over_dds (internal).')
     parser.add_argument('--bag', required=True)
     parser.add_argument('--out', required=True)
     parser.add_argument('--namespace', default='/camera')
