@@ -240,11 +240,8 @@ class EndeffParams:
                             '(revive_distance).', lo=0, hi=10000)
     # A fast end (a foot in a cartwheel, a kick) is often found again farther than
     # revive_distance from where it was lost; its geodesic distance to the root, its kind and
-    # its direction from the root tell its limb. Quick mocap dev split (python -m
-    # tools.id_switches): 0.3 m alone 103 switches, 0.6 m alone 80 (more ids back, more of
-    # them to another end), 0.3 m plus 0.8 m within 0.3 m of geodesic distance 73 but swaps
-    # between limbs 13 -> 15; with no head and the same direction from the root as well 81 and
-    # 13 swaps (Tracker._revived_ids; docs/design.md, "An id comes back").
+    # its direction from the root tell its limb (the measurements: Tracker._revived_ids;
+    # docs/design.md, "An id comes back").
     revive_far_distance: float = _p(0.8, 'A new end-effector farther than revive_distance but '
                                     'within this distance of where a track was lost takes its '
                                     'id back only if its geodesic distance to the root (Eq. 7) '
