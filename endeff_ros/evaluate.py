@@ -60,6 +60,8 @@ from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.types import Track
 from endeff_ros.kind_eval import KindConfusion, confusion_group, confusion_table
+from endeff_ros.ranking import ConfidenceRanking, summary_json
+from endeff_ros.ranking import format_table as confidence_table
 from endeff_ros.scoring import (
     KINDS,
     MATCH_THRESHOLD_M,
@@ -178,6 +180,8 @@ class SequenceResult:
     kind_confusion: KindConfusion = field(default_factory=KindConfusion)
     #: Time consistency of the temporal estimator's ids and positions.
     tracking: TrackingScorer = field(default_factory=TrackingScorer)
+    #: The temporal estimator's published confidences against right and wrong ends.
+    ranking: ConfidenceRanking = field(default_factory=ConfidenceRanking)
 
     @property
     def frames(self) -> int:
@@ -218,6 +222,7 @@ class SequenceResult:
                                         self.scorers['temporal'].seen_points,
                                         {m: self.scorers[m].seen_recall for m in METHODS})
         out['tracking'] = tracking_json(self.tracking)
+        out['confidence'] = self.ranking.to_json()
         out['estimator_input_errors'] = dict(self.input_errors)
         out['seconds'] = {k: round(v, 4) for k, v in self.seconds.items()}
         out['read_stats'] = self.stats
@@ -323,6 +328,9 @@ def evaluate_bag(path: str | Path, *, params: EndeffParams | None = None,
                     if m == 'temporal':
                         res.predicted_false_positives += _predicted_unmatched(tracks, score)
                         res.kind_confusion.add(tracks, kinds, score)
+                        res.ranking.add([getattr(t, 'confidence', 1.0) for t in tracks],
+                                        [getattr(t, 'kind', 0) for t in tracks],
+                                        score.matches, score.n_gt, kinds)
                         res.tracking.add_tracks(frame.stamp_ns, gt, ids_by_stamp.get(
                             frame.stamp_ns), kinds, tracks, score, frame=res.frames)
             if gt is not None:
@@ -407,6 +415,7 @@ def _group_entry(inside: Sequence[SequenceResult], attribute: str | None) -> dic
         sum(r.gt_points for r in inside), sum(r.scorers['temporal'].seen_points for r in inside),
         {m: nanmean(r.scorers[m].seen_recall for r in inside) for m in METHODS})
     entry['tracking'] = tracking_group([r.tracking for r in inside])
+    entry['confidence'] = summary_json([r.ranking for r in inside])
     return entry
 
 
@@ -423,6 +432,7 @@ def build_report(results: Sequence[SequenceResult], failed: Sequence[tuple[str, 
     report['kind_confusion'] = whole['kind_confusion']
     report['labels_seen'] = whole['labels_seen']
     report['tracking'] = whole['tracking']
+    report['confidence'] = summary_json([r.ranking for r in results], curve=True)
     report['labels_in_box'] = _in_box_json(sum(r.gt_points for r in results),
                                            sum(r.gt_in_box for r in results))
     groups = {}
@@ -512,6 +522,9 @@ def format_table(report: dict[str, Any], *, failed: bool = True) -> str:
     tracking = tracking_tables(report, width)
     if tracking:
         lines += ['', *tracking]
+    ranking = confidence_table(report, width)
+    if ranking:
+        lines += ['', *ranking]
     for f in report.get('failed', []) if failed else []:
         lines.append(f'FAILED {f["bag"]}: {f["error"]}')
     return '\n'.join(line.rstrip() for line in lines)
@@ -614,6 +627,31 @@ def write_plots(report: dict[str, Any], out_dir: str | Path) -> list[Path]:
     written.append(out / 'summary_bars.png')
     fig.savefig(written[-1], dpi=110)
     plt.close(fig)
+
+    conf = report.get('confidence', {})
+    if conf.get('pr_curve', {}).get('recall'):
+        fig, (pr, rel) = plt.subplots(1, 2, figsize=(8.4, 3.8))
+        pr.plot(conf['pr_curve']['recall'], conf['pr_curve']['precision'], color='red')
+        pr.set_xlabel('recall', fontsize=9)
+        pr.set_ylabel('precision', fontsize=9)
+        pr.set_title(f'temporal, AP {_num(conf["average_precision"], ".3f")}', fontsize=9)
+        pr.set_xlim(0.0, 1.0)
+        pr.set_ylim(0.0, 1.05)
+        r = conf['reliability']
+        centres = (np.arange(len(r['ends'])) + 0.5) / len(r['ends'])
+        right = [np.nan if v is None else v for v in r['right']]
+        rel.bar(centres, right, 1.0 / len(centres), color='red', alpha=0.6, edgecolor='black')
+        rel.plot([0, 1], [0, 1], color='black', lw=0.8)
+        rel.set_xlabel('published confidence', fontsize=9)
+        rel.set_ylabel('fraction right', fontsize=9)
+        rel.set_title(f'calibration, ECE {_num(conf["calibration_error"], ".3f")}', fontsize=9)
+        for ax in (pr, rel):
+            ax.grid(alpha=0.3)
+            ax.tick_params(labelsize=8)
+        fig.tight_layout()
+        written.append(out / 'confidence.png')
+        fig.savefig(written[-1], dpi=110)
+        plt.close(fig)
     return written
 
 

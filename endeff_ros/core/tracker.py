@@ -56,6 +56,7 @@ import numpy as np
 from .assignment import min_cost_assignment
 from .background import BackgroundModel
 from .bands import UNREACHED
+from .confidence import ConfidenceModel, end_features
 from .floor import FloorPlane
 from .flow import FlowEstimator, propagate_points
 from .graph import (
@@ -169,6 +170,7 @@ class _TrackState:
     detected: bool = True
     offset: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     hits: int = 1  # frames in which a current candidate supported the track
+    protrusion: float = 0.0  # of the candidate that last supported it (Candidate.protrusion)
     held: int = 0  # consecutive frames on its prediction (case B or C)
     # From ``position`` (the rounded end's centre, which is tracked) to the part centre
     # published; a prediction keeps the last detection's (Candidate.centre_shift).
@@ -201,6 +203,8 @@ class Tracker:
         self.background = BackgroundModel()
         self.readable = ReadableArea()
         self.kinds = KindLabeller()  # head, hand, foot or other per track (Track.kind)
+        self._confidence_model: ConfidenceModel | None = None  # loaded at the first score
+        self.features = np.zeros((0, 0))  # the last published ends' evidence (end_features)
         self.reset(forget_ids=True)
 
     def reset(self, *, forget_ids: bool = False) -> None:
@@ -298,8 +302,8 @@ class Tracker:
         self._smooth(frame.stamp_ns)
         stages['update'] = (time.perf_counter() - t0) * 1e3
         self._prev = frame
-        tracks = self.kinds.label([self._publish(t) for t in self._tracks], estimate,
-                                  frame.intrinsics)
+        tracks = self._score(self.kinds.label([self._publish(t) for t in self._tracks],
+                                              estimate, frame.intrinsics), estimate)
         if self.params.background:  # tracked entities are never absorbed by the background
             person = (None if self.params.background_keep_furniture
                       else self.kinds.may_be_people(tracks))
@@ -307,7 +311,20 @@ class Tracker:
                                     frame.intrinsics, self.params.pixel_stride,
                                     detected=[t.detected for t in self._tracks],
                                     person=person)
-        return TrackerResult(frame.stamp_ns, frame.frame_id, tracks, estimate, stages)
+        shown = [t for t in tracks if t.confidence >= self.params.min_confidence]
+        return TrackerResult(frame.stamp_ns, frame.frame_id, shown, estimate, stages)
+
+    def _score(self, tracks: list[Track], estimate: FrameEstimate) -> list[Track]:
+        """The tracks with their evidence (:func:`end_features`, kept in
+        :attr:`features` for the tools that fit the model) and, with ``scored_confidence``,
+        the model's confidence (:mod:`.confidence`)."""
+        self.features = end_features(tracks, self._tracks, estimate)
+        if not self.params.scored_confidence or not tracks:
+            return tracks
+        if self._confidence_model is None:
+            self._confidence_model = ConfidenceModel.load()
+        score = self._confidence_model(self.features)
+        return [replace(t, confidence=float(c)) for t, c in zip(tracks, score, strict=True)]
 
     # -- predict (Section 5.1) ---------------------------------------------------------------
 
@@ -529,7 +546,8 @@ class Tracker:
             cand = cands[j]
             survivors.append(_TrackState(
                 id=track_id, position=cand.end_centre, geodesic=cand.geodesic_approx,
-                entity=cand_entity[j], path=cand.path, centre_shift=cand.centre_shift))
+                entity=cand_entity[j], path=cand.path, centre_shift=cand.centre_shift,
+                protrusion=cand.protrusion))
         return self._drop_duplicates(survivors)
 
     def _on_limb(self, track: _TrackState, cand: Candidate) -> bool:
@@ -712,6 +730,7 @@ class Tracker:
         track.position = cand.end_centre
         track.centre_shift = cand.centre_shift
         track.path = cand.path
+        track.protrusion = cand.protrusion
         track.held = 0
         track.hits += 1
         track.detected = True

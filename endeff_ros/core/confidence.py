@@ -1,0 +1,163 @@
+"""The published ``confidence``: the chance that an end-effector is right, from its evidence.
+
+Section 5 gives each track a memory weight (``σ^k``) and a keep-alive count; as a confidence
+they order right and wrong ends loosely (every detected end gets 1.0, and in a furnished room
+four of five of them are wrong). Instead every published end is scored from the evidence the
+estimator and the tracker already hold, combined in one model rather than in a cascade of
+thresholds:
+
+- its track's history: age, the share of its frames a candidate supported it, whether one
+  supports it now, frames since it was last related (k of Eq. 9) and unmatched (case C);
+- its geometry: Eq. 7 geodesic distance, its protrusion when the iterated Dijkstra found it
+  (compared with g), the straightness of its path (root-to-end distance over geodesic), how
+  far its part centre lies behind the rounded end, its distance to the sensor;
+- its place among its entity's ends: their count, its geodesic over the entity's longest,
+  the nearest other end (second copies beside a hand); the entity's size;
+- its speed, and the part it is (``kind``).
+
+The model is additive and logistic: each feature cut at fixed edges (quantiles of the
+training ends), one weight per interval, ``confidence = 1 / (1 + exp(-(b + sum_f w_f[bin])))``.
+An additive model over binned features learns a non-monotone effect per feature (an end too
+close to its neighbour is doubtful, so is one whose geodesic distance is a fraction of its
+entity's longest) and is calibrated by its fit: trained by maximum likelihood, its
+probabilities match the observed frequencies on the training ends. It is small (a few hundred
+numbers, :data:`MODEL_FILE`), evaluated with numpy, and reproduced by
+``python -m tools.train_confidence`` from the ``dev`` split (docs/design.md).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    import numpy.typing as npt
+
+    from .single_frame import FrameEstimate
+    from .types import Track
+
+MODEL_FILE = Path(__file__).with_name('confidence_model.json')
+"""The committed model (``tools/train_confidence.py`` writes it)."""
+
+FEATURES = ('age', 'hit_ratio', 'detected', 'not_related', 'missed', 'geodesic',
+            'protrusion', 'straightness', 'shift', 'depth', 'entity_ends', 'geodesic_share',
+            'nearest_end', 'entity_size', 'speed', 'head', 'hand', 'foot')
+"""Feature names, in column order of :func:`end_features`."""
+
+_HORIZON = 30  # frames: longer histories are alike (a second at 30 Hz)
+
+
+def end_features(published: Sequence[Track], states: Sequence[Any],
+                 estimate: FrameEstimate) -> npt.NDArray[np.float64]:
+    """(M, len(FEATURES)) evidence per published end. ``states`` are the tracker's
+    per-track memories in the same order (``age``, ``hits``, ``detected``, ``not_related``,
+    ``missed``, ``protrusion``, ``centre_shift``), ``estimate`` the frame's (entities, roots,
+    points)."""
+    m = len(published)
+    out = np.zeros((m, len(FEATURES)))
+    if m == 0:
+        return out
+    pos = np.array([t.position for t in published], dtype=np.float64).reshape(-1, 3)
+    entity = np.array([t.entity for t in published])
+    geo = np.array([t.geodesic for t in published], dtype=np.float64)
+    age = np.array([s.age for s in states], dtype=np.float64)
+    col = {name: i for i, name in enumerate(FEATURES)}
+    out[:, col['age']] = np.log1p(np.minimum(age, 10 * _HORIZON))
+    out[:, col['hit_ratio']] = np.array([s.hits for s in states]) / np.maximum(age, 1)
+    out[:, col['detected']] = [float(s.detected) for s in states]
+    out[:, col['not_related']] = np.minimum([s.not_related for s in states], _HORIZON)
+    out[:, col['missed']] = np.minimum([s.missed for s in states], _HORIZON)
+    out[:, col['geodesic']] = np.where(np.isfinite(geo), geo, 0.0)
+    out[:, col['protrusion']] = [s.protrusion for s in states]
+    out[:, col['shift']] = [float(np.linalg.norm(s.centre_shift)) for s in states]
+    out[:, col['depth']] = pos[:, 2]
+    out[:, col['speed']] = np.minimum(
+        np.linalg.norm(np.array([t.velocity for t in published]).reshape(-1, 3), axis=1), 5.0)
+    kind = np.array([t.kind for t in published])
+    for name, code in (('head', 1), ('hand', 2), ('foot', 3)):
+        out[:, col[name]] = kind == code
+    roots = {e.entity: (np.asarray(e.root, dtype=np.float64), e.point_index)
+             for e in estimate.entities}
+    points = estimate.points
+    for e in np.unique(entity):
+        of = np.flatnonzero(entity == e)
+        out[of, col['entity_ends']] = len(of)
+        longest = np.max(out[of, col['geodesic']])
+        out[of, col['geodesic_share']] = out[of, col['geodesic']] / longest if longest > 0 else 1
+        if len(of) > 1:
+            d = np.linalg.norm(pos[of, None] - pos[None, of], axis=2)
+            np.fill_diagonal(d, np.inf)
+            out[of, col['nearest_end']] = np.minimum(d.min(axis=1), 1.0)
+        else:
+            out[of, col['nearest_end']] = 1.0
+        root, index = roots.get(int(e), (None, None))
+        if root is not None:
+            reach = np.linalg.norm(pos[of] - root, axis=1)
+            out[of, col['straightness']] = np.minimum(
+                reach / np.maximum(out[of, col['geodesic']], 1e-3), 1.5)
+            ext = points[index]
+            out[of, col['entity_size']] = (float(np.linalg.norm(ext.max(axis=0) - ext.min(axis=0)))
+                                           if len(ext) else 0.0)
+    return out
+
+
+@dataclass(frozen=True)
+class ConfidenceModel:
+    """Additive logistic model over binned features (see the module)."""
+
+    names: tuple[str, ...]
+    edges: tuple[npt.NDArray[np.float64], ...]  # per feature, its interior bin edges
+    weights: tuple[npt.NDArray[np.float64], ...]  # per feature, len(edges) + 1 weights
+    bias: float
+
+    def logit(self, features: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """The model's log-odds of (M, F) ``features`` (columns in :data:`FEATURES` order)."""
+        z = np.full(len(features), self.bias)
+        col = {name: i for i, name in enumerate(FEATURES)}
+        for name, edges, weights in zip(self.names, self.edges, self.weights, strict=True):
+            z += weights[np.searchsorted(edges, features[:, col[name]], side='right')]
+        return z
+
+    def __call__(self, features: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Confidence in [0, 1] per row of ``features``."""
+        return 1.0 / (1.0 + np.exp(-self.logit(features)))
+
+    def to_json(self) -> dict[str, Any]:
+        """The model file's content."""
+        return {'bias': self.bias,
+                'features': [{'name': n, 'edges': e.tolist(), 'weights': w.tolist()}
+                             for n, e, w in zip(self.names, self.edges, self.weights,
+                                                strict=True)]}
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> ConfidenceModel:
+        """A model from :meth:`to_json`'s form; raises ValueError on a malformed one."""
+        try:
+            feats = data['features']
+            names = tuple(str(f['name']) for f in feats)
+            edges = tuple(np.asarray(f['edges'], dtype=np.float64) for f in feats)
+            weights = tuple(np.asarray(f['weights'], dtype=np.float64) for f in feats)
+            bias = float(data['bias'])
+        except (KeyError, TypeError) as err:
+            msg = f'confidence model: missing or malformed field ({err})'
+            raise ValueError(msg) from err
+        unknown = sorted(set(names) - set(FEATURES))
+        if unknown:
+            msg = f'confidence model: unknown features {unknown}'
+            raise ValueError(msg)
+        for n, e, w in zip(names, edges, weights, strict=True):
+            if len(w) != len(e) + 1 or np.any(np.diff(e) < 0):
+                msg = f'confidence model: feature {n} has {len(e)} edges and {len(w)} weights'
+                raise ValueError(msg)
+        return cls(names, edges, weights, bias)
+
+    @classmethod
+    def load(cls, path: str | Path = MODEL_FILE) -> ConfidenceModel:
+        """The model in ``path`` (default the committed :data:`MODEL_FILE`)."""
+        return cls.from_json(json.loads(Path(path).read_text(encoding='utf-8')))

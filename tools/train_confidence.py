@@ -1,0 +1,231 @@
+"""Fit the confidence model (:mod:`endeff_ros.core.confidence`) on benchmark bags.
+
+Two steps, so the tracker's run (minutes) and the fit (seconds) can be repeated apart:
+
+    python -m tools.train_confidence collect BAG_OR_DIR [...] --out DIR [--jobs 2]
+    python -m tools.train_confidence fit DIR [...] [--model OUT.json] [--json REPORT]
+
+``collect`` runs the tracker with the paper's confidence (``scored_confidence: false``) and
+every end published (``min_confidence: 0``) over each bag and writes one ``.npz`` per bag:
+per published end of a frame with ground truth its evidence (:func:`end_features`), whether
+the frame's matching (0.15 m, as ``endeff eval``) made it right, the frame, the paper's
+confidence; per frame its ground-truth count. ``fit`` cuts each feature at the quantiles of
+the ends (at most :data:`BINS` intervals), fits the additive logistic model by Newton's method
+with an L2 penalty (:data:`PENALTY`) on the interval weights, writes the model (default the
+committed ``endeff_ros/core/confidence_model.json``) and prints the fit: average precision and
+calibration error of the model and of the paper's confidence on the ends it was fitted on,
+and per ``min_confidence`` the ends kept, right ends lost and false ends removed.
+
+The committed model comes from the ``dev`` bags only (docs/design.md, "Confidence"): the mocap
+suite's dev split (``endeff synth --suite mocap --only 'dev__*'``), the rooms' dev pairs and
+the paper suite's generic entities drawn with another seed (``endeff synth --only generic
+--seed 1``), so that it learns what an end is on chairs, robot arms and stars too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from endeff_ros.attributes import custom_data, parse_attributes
+from endeff_ros.bag.reader import BagReader, bag_name, find_bags
+from endeff_ros.cli_common import positive_int
+from endeff_ros.core.confidence import FEATURES, MODEL_FILE, ConfidenceModel
+from endeff_ros.core.errors import InputError
+from endeff_ros.core.params import EndeffParams
+from endeff_ros.core.tracker import Tracker
+from endeff_ros.ranking import average_precision, calibration_bins, calibration_error
+from endeff_ros.scoring import score_frame
+
+BINS = 8
+"""Intervals per continuous feature (cut at quantiles of the training ends)."""
+PENALTY = 1.0
+"""L2 penalty on the interval weights (in units of the log-likelihood of one end)."""
+BINARY = ('detected', 'head', 'hand', 'foot')
+"""Features that are 0 or 1: one cut at 0.5."""
+
+
+def collect_bag(bag: Path, out: Path, params: EndeffParams | None = None) -> str:
+    """Run the tracker over ``bag`` and write its ends' evidence to ``out/<bag>.npz``."""
+    params = replace(params or EndeffParams(), scored_confidence=False, min_confidence=0.0)
+    tracker = Tracker(params)
+    feats, right, frame, paper, n_gt = [], [], [], [], []
+    with BagReader(bag) as reader:
+        attributes, _ = parse_attributes(custom_data(reader.reader), str(bag))
+        for frm, gt in reader.frames():
+            try:
+                tracks = tracker.update(frm).tracks
+            except InputError:
+                continue
+            if gt is None:
+                continue
+            positions = np.array([t.position for t in tracks], dtype=np.float64).reshape(-1, 3)
+            score = score_frame(positions, np.asarray(gt, dtype=np.float64)[:, :3])
+            ok = np.zeros(len(tracks), dtype=bool)
+            ok[score.matches[:, 0]] = True
+            feats.append(tracker.features.reshape(len(tracks), len(FEATURES)))
+            right.append(ok)
+            frame.append(np.full(len(tracks), len(n_gt)))
+            paper.append([t.confidence for t in tracks])
+            n_gt.append(score.n_gt)
+    name = bag_name(bag)
+    np.savez_compressed(
+        out / f'{name}.npz', features=np.concatenate(feats or [np.zeros((0, len(FEATURES)))]),
+        right=np.concatenate(right or [np.zeros(0, bool)]),
+        frame=np.concatenate(frame or [np.zeros(0, int)]),
+        paper=np.concatenate([np.asarray(p, dtype=np.float64) for p in paper] or [np.zeros(0)]),
+        n_gt=np.asarray(n_gt, dtype=np.int64), names=np.asarray(FEATURES),
+        attributes=json.dumps(attributes))
+    return name
+
+
+def _collect(job: tuple[Path, Path]) -> str:
+    return collect_bag(*job)
+
+
+def load(dirs: list[Path]) -> dict[str, Any]:
+    """Every collected bag in ``dirs``: stacked ends, their bag index, and per bag its
+    ground-truth count and attributes."""
+    files = sorted(f for d in dirs for f in (d.glob('*.npz') if d.is_dir() else [d]))
+    if not files:
+        msg = f'no collected bags (.npz) in {", ".join(map(str, dirs))}'
+        raise SystemExit(msg)
+    parts = [np.load(f) for f in files]
+    for f, p in zip(files, parts, strict=True):
+        if tuple(p['names']) != FEATURES:
+            msg = f'{f}: collected with other features; collect again'
+            raise SystemExit(msg)
+    return {'features': np.concatenate([p['features'] for p in parts]),
+            'right': np.concatenate([p['right'] for p in parts]),
+            'paper': np.concatenate([p['paper'] for p in parts]),
+            'bag': np.concatenate([np.full(len(p['right']), i) for i, p in enumerate(parts)]),
+            'n_gt': np.array([int(p['n_gt'].sum()) for p in parts]),
+            'names': [f.stem for f in files],
+            'attributes': [json.loads(str(p['attributes'])) for p in parts]}
+
+
+def bin_edges(features: np.ndarray) -> list[np.ndarray]:
+    """Per feature its interior cuts: 0.5 for a binary one, else the distinct quantiles."""
+    edges = []
+    for k, name in enumerate(FEATURES):
+        if name in BINARY:
+            edges.append(np.array([0.5]))
+            continue
+        q = np.quantile(features[:, k], np.linspace(0, 1, BINS + 1)[1:-1])
+        edges.append(np.unique(q))
+    return edges
+
+
+def design(features: np.ndarray, edges: list[np.ndarray]) -> tuple[np.ndarray, list[int]]:
+    """One-hot interval indicators of every feature, (M, sum of intervals), float32."""
+    cols, offsets, start = [], [], 0
+    for k, e in enumerate(edges):
+        b = np.searchsorted(e, features[:, k], side='right')
+        one = np.zeros((len(features), len(e) + 1), dtype=np.float32)
+        one[np.arange(len(features)), b] = 1.0
+        cols.append(one)
+        offsets.append(start)
+        start += len(e) + 1
+    return np.concatenate(cols, axis=1), offsets
+
+
+def fit(features: np.ndarray, right: np.ndarray, *, penalty: float = PENALTY,
+        iterations: int = 30) -> ConfidenceModel:
+    """The additive logistic model by Newton's method (L2 on the interval weights)."""
+    edges = bin_edges(features)
+    x, offsets = design(features, edges)
+    y = right.astype(np.float64)
+    w = np.zeros(x.shape[1])
+    prior = min(max(y.mean(), 1e-3), 1 - 1e-3)
+    b = float(np.log(prior / (1 - prior)))
+    for _ in range(iterations):
+        z = b + x @ w
+        p = 1.0 / (1.0 + np.exp(-z))
+        r = p * (1 - p)
+        g_w = x.T @ (p - y) + penalty * w
+        g_b = float(np.sum(p - y))
+        xr = x * r[:, None].astype(np.float32)
+        h_ww = x.T @ xr + penalty * np.eye(len(w))
+        h_wb = xr.sum(axis=0)
+        h = np.block([[h_ww, h_wb[:, None]], [h_wb[None, :], np.array([[r.sum()]])]])
+        step = np.linalg.solve(h, np.r_[g_w, g_b])
+        w -= step[:-1]
+        b -= float(step[-1])
+        if np.max(np.abs(step)) < 1e-6:
+            break
+    weights = tuple(w[o:o + len(e) + 1] for o, e in zip(offsets, edges, strict=True))
+    return ConfidenceModel(FEATURES, tuple(edges), weights, b)
+
+
+def summary(data: dict[str, Any], confidence: np.ndarray) -> dict[str, float]:
+    """AP (mean over bags) and calibration error (pooled) of ``confidence`` on ``data``."""
+    aps = [average_precision(confidence[data['bag'] == i], data['right'][data['bag'] == i], n)
+           for i, n in enumerate(data['n_gt']) if n > 0]
+    return {'average_precision': float(np.mean(aps)),
+            'calibration_error': calibration_error(calibration_bins(confidence, data['right']))}
+
+
+def operating_points(data: dict[str, Any], confidence: np.ndarray,
+                     thresholds: tuple[float, ...] = (0.0, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5),
+                     ) -> list[dict[str, float]]:
+    """Per ``min_confidence``: ends kept, right ends lost and false ends removed (shares of
+    all), with the frame matching held fixed (an end removed frees no label for another)."""
+    right = data['right']
+    out = []
+    for t in thresholds:
+        keep = confidence >= t
+        out.append({'min_confidence': t, 'kept': float(keep.mean()),
+                    'right_lost': float((right & ~keep).sum() / max(right.sum(), 1)),
+                    'false_removed': float((~right & ~keep).sum() / max((~right).sum(), 1))})
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    sub = parser.add_subparsers(dest='step', required=True)
+    c = sub.add_parser('collect', help="run the tracker over bags, keep each end's evidence")
+    c.add_argument('bags', nargs='+')
+    c.add_argument('--out', required=True)
+    c.add_argument('--jobs', type=positive_int, default=1)
+    f = sub.add_parser('fit', help='fit the model on collected bags')
+    f.add_argument('dirs', nargs='+')
+    f.add_argument('--model', default=str(MODEL_FILE))
+    f.add_argument('--penalty', type=float, default=PENALTY)
+    f.add_argument('--json', help='also write the fit report here')
+    args = parser.parse_args(argv)
+    if args.step == 'collect':
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        work = [(b, out) for b in sorted(find_bags(args.bags))]
+        if args.jobs > 1:
+            import multiprocessing
+
+            with multiprocessing.get_context('spawn').Pool(args.jobs) as pool:
+                for name in pool.imap_unordered(_collect, work):
+                    print(name, file=sys.stderr, flush=True)
+        else:
+            for job in work:
+                print(_collect(job), file=sys.stderr, flush=True)
+        return 0
+    data = load([Path(d) for d in args.dirs])
+    model = fit(data['features'], data['right'], penalty=args.penalty)
+    Path(args.model).write_text(json.dumps(model.to_json(), indent=1) + '\n', encoding='utf-8')
+    conf = model(data['features'])
+    report = {'bags': len(data['names']), 'ends': len(data['right']),
+              'right': float(data['right'].mean()),
+              'model': summary(data, conf), 'paper': summary(data, data['paper']),
+              'operating_points': operating_points(data, conf)}
+    print(json.dumps(report, indent=1))
+    if args.json:
+        Path(args.json).write_text(json.dumps(report, indent=1) + '\n', encoding='utf-8')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
