@@ -13,7 +13,7 @@ thresholds:
   far its part centre lies behind the rounded end, its distance to the sensor;
 - its place among its entity's ends: their count, its geodesic over the entity's longest,
   the nearest other end (second copies beside a hand); the entity's size;
-- its speed, and the part it is (``kind``).
+- its speed now and the highest its track ever had, and the part it is (``kind``).
 
 The model is additive and logistic: each feature cut at fixed edges (quantiles of the
 training ends), one weight per interval, ``confidence = 1 / (1 + exp(-(b + sum_f w_f[bin])))``.
@@ -47,7 +47,7 @@ MODEL_FILE = Path(__file__).with_name('confidence_model.json')
 
 FEATURES = ('age', 'hit_ratio', 'detected', 'not_related', 'missed', 'geodesic',
             'protrusion', 'straightness', 'shift', 'depth', 'entity_ends', 'geodesic_share',
-            'nearest_end', 'entity_size', 'speed', 'head', 'hand', 'foot')
+            'nearest_end', 'entity_size', 'speed', 'moved', 'head', 'hand', 'foot')
 """Feature names, in column order of :func:`end_features`."""
 
 _HORIZON = 30  # frames: longer histories are alike (a second at 30 Hz)
@@ -57,7 +57,7 @@ def end_features(published: Sequence[Track], states: Sequence[Any],
                  estimate: FrameEstimate) -> npt.NDArray[np.float64]:
     """(M, len(FEATURES)) evidence per published end. ``states`` are the tracker's
     per-track memories in the same order (``age``, ``hits``, ``detected``, ``not_related``,
-    ``missed``, ``protrusion``, ``centre_shift``), ``estimate`` the frame's (entities, roots,
+    ``missed``, ``protrusion``, ``centre_shift``, ``moved``), ``estimate`` the frame's (entities, roots,
     points)."""
     m = len(published)
     out = np.zeros((m, len(FEATURES)))
@@ -79,6 +79,7 @@ def end_features(published: Sequence[Track], states: Sequence[Any],
     out[:, col['depth']] = pos[:, 2]
     out[:, col['speed']] = np.minimum(
         np.linalg.norm(np.array([t.velocity for t in published]).reshape(-1, 3), axis=1), 5.0)
+    out[:, col['moved']] = np.minimum([s.moved for s in states], 5.0)
     kind = np.array([t.kind for t in published])
     for name, code in (('head', 1), ('hand', 2), ('foot', 3)):
         out[:, col[name]] = kind == code

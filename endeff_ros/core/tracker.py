@@ -181,6 +181,7 @@ class _TrackState:
     smoothed: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     velocity: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     stamp_ns: int = -1
+    moved: float = 0.0  # the highest speed (m/s) of its published velocity so far
 
 
 @dataclass(frozen=True)
@@ -758,6 +759,7 @@ class Tracker:
                               p.smoothing_max_lag, p.smoothing_reset_distance))
         for t, r, s, v in zip(self._tracks, raw, smoothed, velocity, strict=True):
             t.raw, t.smoothed, t.velocity, t.stamp_ns = r, s, v, stamp_ns
+            t.moved = max(t.moved, float(np.linalg.norm(v)))
 
     def _publish(self, t: _TrackState) -> Track:
         p = self.params
