@@ -57,8 +57,8 @@ def end_features(published: Sequence[Track], states: Sequence[Any],
                  estimate: FrameEstimate) -> npt.NDArray[np.float64]:
     """(M, len(FEATURES)) evidence per published end. ``states`` are the tracker's
     per-track memories in the same order (``age``, ``hits``, ``detected``, ``not_related``,
-    ``missed``, ``protrusion``, ``centre_shift``, ``moved``), ``estimate`` the frame's (entities, roots,
-    points)."""
+    ``missed``, ``protrusion``, ``centre_shift``, ``moved``), ``estimate`` the frame's
+    (entities, roots, points)."""
     m = len(published)
     out = np.zeros((m, len(FEATURES)))
     if m == 0:
