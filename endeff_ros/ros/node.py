@@ -79,12 +79,13 @@ End-effectors of people and articulated entities in an RGB-D stream, tracked ove
 (Lin, Pardas & Casas, 2016).
 
 subscribes (relative names, remappable with -r):
-  color/image_raw       sensor_msgs/Image (rgb8, bgr8, mono8); optional (use_color)
+  color/image_raw       sensor_msgs/Image (rgb8, bgr8, rgba8, bgra8, mono8); optional (use_color)
   depth/image_raw       sensor_msgs/Image registered to colour: 16UC1 mm or 32FC1 m
   depth/camera_info     sensor_msgs/CameraInfo
   (image_transport compressed/auto: .../compressed, .../compressedDepth)
 publishes:
-  end_effectors         sensor_msgs/PointCloud2: x y z id entity geodesic confidence state
+  end_effectors         sensor_msgs/PointCloud2: x y z id entity geodesic confidence vx vy vz
+                        state kind (docs/output.md)
   end_effectors/markers visualization_msgs/MarkerArray (built only for subscribers)
   debug/bands, debug/image (optional), /diagnostics
 services:
