@@ -11,7 +11,8 @@ per published end of a frame with ground truth its evidence (:func:`end_features
 the frame's matching (0.15 m, as ``endeff eval``) made it right, the frame, the paper's
 confidence; per frame its ground-truth count. ``fit`` cuts each feature at the quantiles of
 the ends (at most :data:`BINS` intervals), fits the additive logistic model by Newton's method
-with an L2 penalty (:data:`PENALTY`) on the interval weights, writes the model (default the
+with penalties on the differences of neighbouring intervals' weights (:data:`PENALTY`)
+and on the weights (:data:`RIDGE`), writes the model (default the
 committed ``endeff_ros/core/confidence_model.json``) and prints the fit: average precision and
 calibration error of the model and of the paper's confidence on the ends it was fitted on,
 and per ``min_confidence`` the ends kept, right ends lost and false ends removed.
@@ -36,7 +37,7 @@ import numpy as np
 from endeff_ros.attributes import custom_data, parse_attributes
 from endeff_ros.bag.reader import BagReader, bag_name, find_bags
 from endeff_ros.cli_common import positive_int
-from endeff_ros.core.confidence import FEATURES, MODEL_FILE, ConfidenceModel
+from endeff_ros.core.confidence import FEATURES, MODEL_FILE, NO_FLOOR, ConfidenceModel
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.tracker import Tracker
@@ -45,8 +46,11 @@ from endeff_ros.scoring import score_frame
 
 BINS = 8
 """Intervals per continuous feature (cut at quantiles of the training ends)."""
-PENALTY = 1.0
-"""L2 penalty on the interval weights (in units of the log-likelihood of one end)."""
+PENALTY = 30.0
+"""Penalty on the squared differences of neighbouring intervals' weights (in units of the
+log-likelihood of one end): each feature's effect is smooth unless many ends say otherwise."""
+RIDGE = 1.0
+"""Penalty on the squared weights (keeps the fit defined where a feature is constant)."""
 BINARY = ('detected', 'head', 'hand', 'foot')
 """Features that are 0 or 1: one cut at 0.5."""
 
@@ -105,6 +109,8 @@ def load(dirs: list[Path]) -> dict[str, Any]:
             'right': np.concatenate([p['right'] for p in parts]),
             'paper': np.concatenate([p['paper'] for p in parts]),
             'bag': np.concatenate([np.full(len(p['right']), i) for i, p in enumerate(parts)]),
+            'frame': np.concatenate([p['frame'] for p in parts]),
+            'frames': np.array([len(p['n_gt']) for p in parts]),
             'n_gt': np.array([int(p['n_gt'].sum()) for p in parts]),
             'names': [f.stem for f in files],
             'attributes': [json.loads(str(p['attributes'])) for p in parts]}
@@ -118,6 +124,8 @@ def bin_edges(features: np.ndarray) -> list[np.ndarray]:
             edges.append(np.array([0.5]))
             continue
         q = np.quantile(features[:, k], np.linspace(0, 1, BINS + 1)[1:-1])
+        if name == 'height':  # no floor known: an interval of its own
+            q = np.r_[NO_FLOOR + 0.5, q[q > NO_FLOOR + 0.5]]
         edges.append(np.unique(q))
     return edges
 
@@ -142,16 +150,22 @@ def fit(features: np.ndarray, right: np.ndarray, *, penalty: float = PENALTY,
     x, offsets = design(features, edges)
     y = right.astype(np.float64)
     w = np.zeros(x.shape[1])
+    # Neighbouring intervals of a feature should not differ without evidence: the penalty is on
+    # their differences (a smooth effect per feature) plus a small one on the weights.
+    reg = RIDGE * np.eye(len(w))
+    for o, e in zip(offsets, edges, strict=True):
+        d = np.diff(np.eye(len(e) + 1), axis=0)
+        reg[o:o + len(e) + 1, o:o + len(e) + 1] += penalty * d.T @ d
     prior = min(max(y.mean(), 1e-3), 1 - 1e-3)
     b = float(np.log(prior / (1 - prior)))
     for _ in range(iterations):
         z = b + x @ w
         p = 1.0 / (1.0 + np.exp(-z))
         r = p * (1 - p)
-        g_w = x.T @ (p - y) + penalty * w
+        g_w = x.T @ (p - y) + reg @ w
         g_b = float(np.sum(p - y))
         xr = x * r[:, None].astype(np.float32)
-        h_ww = x.T @ xr + penalty * np.eye(len(w))
+        h_ww = x.T @ xr + reg
         h_wb = xr.sum(axis=0)
         h = np.block([[h_ww, h_wb[:, None]], [h_wb[None, :], np.array([[r.sum()]])]])
         step = np.linalg.solve(h, np.r_[g_w, g_b])
@@ -171,18 +185,43 @@ def summary(data: dict[str, Any], confidence: np.ndarray) -> dict[str, float]:
             'calibration_error': calibration_error(calibration_bins(confidence, data['right']))}
 
 
+def bag_scores(data: dict[str, Any], keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per bag its recall and FPR (means over its frames, as ``endeff eval``) with only the
+    ``keep`` ends published, the frame matching held fixed (an end removed frees no label)."""
+    recall, fpr = np.full(len(data['names']), np.nan), np.zeros(len(data['names']))
+    for i, n in enumerate(data['frames']):
+        of = data['bag'] == i
+        frame, right, kept = data['frame'][of], data['right'][of], keep[of]
+        shown = np.bincount(frame[kept], minlength=n)
+        wrong = np.bincount(frame[kept & ~right], minlength=n)
+        fpr[i] = np.mean(np.where(shown > 0, wrong / np.maximum(shown, 1), 0.0)) if n else 0.0
+        if data['n_gt'][i]:
+            recall[i] = (right & kept).sum() / data['n_gt'][i]
+    return recall, fpr
+
+
+GROUPS = ('motion', 'room', 'people', 'child', 'sensor')
+"""Attributes whose groups the fit report shows (people first: a threshold that costs a group
+its recall is seen there)."""
+
+
 def operating_points(data: dict[str, Any], confidence: np.ndarray,
-                     thresholds: tuple[float, ...] = (0.0, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5),
-                     ) -> list[dict[str, float]]:
-    """Per ``min_confidence``: ends kept, right ends lost and false ends removed (shares of
-    all), with the frame matching held fixed (an end removed frees no label for another)."""
-    right = data['right']
+                     thresholds: tuple[float, ...] = (0.0, 0.02, 0.05, 0.1, 0.15, 0.2, 0.3),
+                     ) -> list[dict[str, Any]]:
+    """Per ``min_confidence``: recall and FPR (means over the bags, and per group of
+    :data:`GROUPS`), the frame matching held fixed."""
     out = []
     for t in thresholds:
-        keep = confidence >= t
-        out.append({'min_confidence': t, 'kept': float(keep.mean()),
-                    'right_lost': float((right & ~keep).sum() / max(right.sum(), 1)),
-                    'false_removed': float((~right & ~keep).sum() / max((~right).sum(), 1))})
+        recall, fpr = bag_scores(data, confidence >= t)
+        row: dict[str, Any] = {'min_confidence': t, 'recall': float(np.nanmean(recall)),
+                               'fpr': float(np.mean(fpr))}
+        for key in GROUPS:
+            values = [str(a.get(key)) for a in data['attributes']]
+            for v in sorted(set(values)):
+                sel = np.array([x == v for x in values])
+                row[f'{key}={v}'] = (round(float(np.nanmean(recall[sel])), 3),
+                                     round(float(np.mean(fpr[sel])), 3))
+        out.append(row)
     return out
 
 

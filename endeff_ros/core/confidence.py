@@ -8,9 +8,11 @@ thresholds:
 
 - its track's history: age, the share of its frames a candidate supported it, whether one
   supports it now, frames since it was last related (k of Eq. 9) and unmatched (case C);
+- its place: height above the floor, distance to the image's border (a body cut by the
+  border or a dead margin ends there), distance to the sensor;
 - its geometry: Eq. 7 geodesic distance, its protrusion when the iterated Dijkstra found it
   (compared with g), the straightness of its path (root-to-end distance over geodesic), how
-  far its part centre lies behind the rounded end, its distance to the sensor;
+  far its part centre lies behind the rounded end;
 - its place among its entity's ends: their count, its geodesic over the entity's longest,
   the nearest other end (second copies beside a hand); the entity's size;
 - its speed now and the highest its track ever had, and the part it is (``kind``).
@@ -40,25 +42,29 @@ if TYPE_CHECKING:
     import numpy.typing as npt
 
     from .single_frame import FrameEstimate
-    from .types import Track
+    from .types import Intrinsics, Track
 
 MODEL_FILE = Path(__file__).with_name('confidence_model.json')
 """The committed model (``tools/train_confidence.py`` writes it)."""
 
 FEATURES = ('age', 'hit_ratio', 'detected', 'not_related', 'missed', 'geodesic',
             'protrusion', 'straightness', 'shift', 'depth', 'entity_ends', 'geodesic_share',
-            'nearest_end', 'entity_size', 'speed', 'moved', 'head', 'hand', 'foot')
+            'nearest_end', 'entity_size', 'height', 'border', 'speed', 'moved', 'head', 'hand',
+            'foot')
 """Feature names, in column order of :func:`end_features`."""
 
 _HORIZON = 30  # frames: longer histories are alike (a second at 30 Hz)
+NO_FLOOR = -1.0
+"""``height`` of every end when no floor is known (below any height an end can have)."""
 
 
 def end_features(published: Sequence[Track], states: Sequence[Any],
-                 estimate: FrameEstimate) -> npt.NDArray[np.float64]:
+                 estimate: FrameEstimate, intrinsics: Intrinsics | None = None,
+                 ) -> npt.NDArray[np.float64]:
     """(M, len(FEATURES)) evidence per published end. ``states`` are the tracker's
     per-track memories in the same order (``age``, ``hits``, ``detected``, ``not_related``,
     ``missed``, ``protrusion``, ``centre_shift``, ``moved``), ``estimate`` the frame's
-    (entities, roots, points)."""
+    (entities, roots, points, floor), ``intrinsics`` its camera (None: no image border)."""
     m = len(published)
     out = np.zeros((m, len(FEATURES)))
     if m == 0:
@@ -80,6 +86,16 @@ def end_features(published: Sequence[Track], states: Sequence[Any],
     out[:, col['speed']] = np.minimum(
         np.linalg.norm(np.array([t.velocity for t in published]).reshape(-1, 3), axis=1), 5.0)
     out[:, col['moved']] = np.minimum([s.moved for s in states], 5.0)
+    floor = estimate.floor
+    out[:, col['height']] = (np.clip(floor.distance(pos), -0.5, 3.0) if floor is not None
+                             else NO_FLOOR)
+    if intrinsics is not None:
+        uv = intrinsics.project(pos)
+        to_border = np.minimum.reduce([uv[:, 0], intrinsics.width - 1 - uv[:, 0], uv[:, 1],
+                                       intrinsics.height - 1 - uv[:, 1]])
+        out[:, col['border']] = np.clip(np.nan_to_num(to_border / intrinsics.width), 0, 0.25)
+    else:
+        out[:, col['border']] = 0.25
     kind = np.array([t.kind for t in published])
     for name, code in (('head', 1), ('hand', 2), ('foot', 3)):
         out[:, col[name]] = kind == code

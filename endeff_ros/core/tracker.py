@@ -319,7 +319,7 @@ class Tracker:
         """The tracks with their evidence (:func:`end_features`, kept in
         :attr:`features` for the tools that fit the model) and, with ``scored_confidence``,
         the model's confidence (:mod:`.confidence`)."""
-        self.features = end_features(tracks, self._tracks, estimate)
+        self.features = end_features(tracks, self._tracks, estimate, self._intrinsics)
         if not self.params.scored_confidence or not tracks:
             return tracks
         if self._confidence_model is None:

@@ -1,0 +1,73 @@
+"""The scored confidence (endeff_ros.core.confidence), its model file and min_confidence."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import scenarios as sc
+
+from endeff_ros.core.confidence import FEATURES, MODEL_FILE, ConfidenceModel
+from endeff_ros.core.params import EndeffParams
+from endeff_ros.core.tracker import Tracker
+from tools.train_confidence import fit
+
+
+def _model(weights: dict[str, tuple[list[float], list[float]]], bias: float = 0.0) -> dict:
+    return {'bias': bias, 'features': [{'name': n, 'edges': e, 'weights': w}
+                                       for n, (e, w) in weights.items()]}
+
+
+def test_the_model_adds_one_weight_per_feature_interval():
+    model = ConfidenceModel.from_json(_model({'age': ([1.0, 2.0], [-1.0, 0.0, 2.0]),
+                                              'detected': ([0.5], [-3.0, 1.0])}, bias=0.5))
+    x = np.zeros((3, len(FEATURES)))
+    x[:, FEATURES.index('age')] = [0.5, 1.5, 3.0]
+    x[:, FEATURES.index('detected')] = [1, 0, 1]
+    np.testing.assert_allclose(model.logit(x), [0.5 - 1 + 1, 0.5 + 0 - 3, 0.5 + 2 + 1])
+    assert np.all((model(x) > 0) & (model(x) < 1))
+
+
+@pytest.mark.parametrize(('bad', 'why'), [
+    ({'features': []}, 'missing'),
+    (_model({'elbow_angle': ([0.5], [0.0, 1.0])}), 'unknown features'),
+    (_model({'age': ([0.5, 1.0], [0.0, 1.0])}), '2 edges and 2 weights'),
+])
+def test_a_malformed_model_is_refused_with_what_is_wrong(bad, why):
+    with pytest.raises(ValueError, match=why):
+        ConfidenceModel.from_json(bad)
+
+
+def test_the_committed_model_loads_and_covers_every_feature():
+    data = json.loads(MODEL_FILE.read_text(encoding='utf-8'))
+    model = ConfidenceModel.from_json(data)
+    assert set(model.names) == set(FEATURES)
+
+
+def test_fit_recovers_a_feature_that_decides_and_is_calibrated():
+    """On ends where the nearest other end decides (right beyond 0.2 m 90 % of the time,
+    within it 10 %), the fitted model ranks by it and its probabilities match."""
+    rng = np.random.default_rng(1)
+    x = rng.random((4000, len(FEATURES)))
+    near = x[:, FEATURES.index('nearest_end')] < 0.2
+    right = rng.random(len(x)) < np.where(near, 0.1, 0.9)
+    model = fit(x, right)
+    p = model(x)
+    assert p[near].mean() == pytest.approx(0.1, abs=0.03)
+    assert p[~near].mean() == pytest.approx(0.9, abs=0.03)
+
+
+def test_min_confidence_hides_ends_but_keeps_tracking_them():
+    """Ends below ``min_confidence`` are not published, yet their tracks go on: an end that
+    is shown again keeps the id it had (the filter is on the output only)."""
+    shots = sc.hand_to_side(5, 8)
+    base = dict(background=False, scored_confidence=True)
+    every = [Tracker(EndeffParams(**base)).update(s.frame) for s in shots]
+    tracker = Tracker(EndeffParams(**base, min_confidence=0.5))
+    shown = [tracker.update(s.frame) for s in shots]
+    for a, b in zip(every, shown, strict=True):
+        assert {t.id for t in b.tracks} == {t.id for t in a.tracks if t.confidence >= 0.5}
+        for t in b.tracks:
+            assert t.confidence >= 0.5
+    assert sum(len(a.tracks) for a in every) > sum(len(b.tracks) for b in shown) > 0
