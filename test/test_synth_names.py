@@ -1,5 +1,5 @@
-"""The mocap suite draws and names a clip's bags from the clip alone: a machine with only the
-committed clips lists them exactly as one with the fetched cache does."""
+"""The mocap and rooms suites draw and name a clip's bags from the clip alone: a machine with
+only the committed clips lists them exactly as one with the fetched cache does."""
 
 from __future__ import annotations
 
@@ -9,10 +9,18 @@ import pytest
 
 from endeff_ros.synth import cli as synth_cli
 from endeff_ros.synth.cases import suite_specs
-from endeff_ros.synth.mocap.catalogue import CLIPS, SOURCES, load_clips
+from endeff_ros.synth.mocap.catalogue import CLIPS, SOURCES, entry_path, load_clips
 from endeff_ros.synth.mocap.clip import MotionClip
 from endeff_ros.synth.proc_clips import sit_clip, walk_clip, wave_clip
-from endeff_ros.synth.suite import catalogue_index
+from endeff_ros.synth.rooms_suite import (
+    FULL_PANS,
+    PAN_BAG_S,
+    PAN_CLIPS,
+    PAN_FAMILIES,
+    _spread,
+    pan_pool,
+)
+from endeff_ros.synth.suite import FPS, catalogue_index, resampled
 
 
 def _stand_in(entry) -> MotionClip:
@@ -34,11 +42,11 @@ def fetched():
     return [_stand_in(e) for e in CLIPS if not SOURCES[e.source].committed]
 
 
-def _listing(monkeypatch, capsys, clips) -> list[str]:
+def _listing(monkeypatch, capsys, clips, suite: str = 'mocap') -> list[str]:
     monkeypatch.setattr(synth_cli, 'load_suite_clips', lambda quick, cache: list(clips))
     parser = argparse.ArgumentParser()
     synth_cli.add_arguments(parser)
-    assert synth_cli.run(parser.parse_args(['--suite', 'mocap', '--list'])) == 0
+    assert synth_cli.run(parser.parse_args(['--suite', suite, '--list'])) == 0
     return capsys.readouterr().out.splitlines()[:-1]
 
 
@@ -86,3 +94,36 @@ def test_a_multi_person_bag_keeps_its_own_draw_when_partners_change(fetched):
         assert other.people[0] == spec.people[0]
         assert (other.sensor, other.room, other.frames) == (spec.sensor, spec.room,
                                                             spec.frames)
+
+
+def test_committed_rooms_pairs_list_the_same_with_or_without_the_cache(monkeypatch, capsys,
+                                                                      committed, fetched):
+    alone = _listing(monkeypatch, capsys, committed, 'rooms')
+    cached = _listing(monkeypatch, capsys, committed + fetched, 'rooms')
+    committed_names = {c.name.replace('/', '-') for c in committed}
+    # Alone, the committed clips' pairs only, each line (name, number, attributes) as in the
+    # listing with the cache: no pair moves to a committed clip when fetched ones are missing.
+    assert alone == [line for line in cached if line.split('__')[1] in committed_names]
+    assert len(cached) > len(alone)
+    static = [line for line in alone if '"case": "segment"' in line]
+    assert static and all('"camera": "static"' in line for line in static)
+    assert any('"motion": "still"' in line for line in alone)
+    assert any('"motion": "slow"' in line for line in alone)
+    # The pan pairs are those of PAN_CLIPS (fetched clips) and exist with the cache only.
+    pans = {line.split('__')[1] for line in cached if '"camera": "pan"' in line}
+    assert pans == {n.replace('/', '-') for names in PAN_CLIPS.values() for n in names}
+
+
+def _cache_complete() -> bool:
+    return all(entry_path(e).is_file() for e in CLIPS)
+
+
+@pytest.mark.skipif(not _cache_complete(), reason='needs the whole fetched clip cache')
+def test_the_fixed_pan_clips_are_the_spread_of_the_clips_that_stay_in_place():
+    clips = load_clips(names={e.name for e in CLIPS if e.family in PAN_FAMILIES},
+                       loop_s=synth_cli.LOOP_S)
+    pos = {c.name: resampled(c) for c in clips}
+    for split, names in PAN_CLIPS.items():
+        pool = sorted((c for c in clips if c.split == split), key=lambda c: (c.family, c.name))
+        chosen = _spread(pan_pool(pool, pos, round(PAN_BAG_S * FPS)), FULL_PANS)
+        assert tuple(c.name for c in chosen) == names

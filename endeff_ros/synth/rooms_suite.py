@@ -24,6 +24,14 @@ Bag names are ``<split>__<clip>__<nnn>-<view>-<sensor>-<room>-p<people>-<camera>
 each split gets ``FULL_PAIRS`` static and ``FULL_PANS`` pan pairs (``--quick``: ``QUICK_PAIRS``
 and ``QUICK_PANS`` short ones), the clips spread over the split's families.
 
+In the full suite the static pairs are spread over the whole catalogue's clips of the split
+(``mocap.catalogue``, fetched or not) and the pan pairs' clips are fixed (``PAN_CLIPS``), so a
+pair's clip, number, name and attributes do not depend on which clips are loaded; a pair whose
+clip is not loaded is left out (its number stays unused), and a clip outside the catalogue
+has none. A machine with the committed clips only lists their pairs exactly as one with the
+fetched cache does. Only the partners of a two-person pair are drawn from the clips loaded.
+The quick suite spreads its pairs over the clips it is given (the committed ones).
+
 Attributes (``endeff.attributes``): the mocap suite's (``interaction`` always ``none``), plus
 ``camera`` (``static``/``pan``), ``pair`` (the two bag names, empty first: a list, so that
 ``endeff eval`` forms no group of it) and, for pans, ``pan_s`` (start and end of the turn in s
@@ -35,6 +43,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from typing import TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -62,12 +71,27 @@ PAN_FAMILIES = ('wave', 'gesture', 'reach', 'punch', 'kick', 'dance', 'bend', 'j
                 'walk')
 PAN_MIN_DISTANCE_M = 2.0
 ROOMS = ('empty', 'furnished')
+# The full suite's pan clips per split: ``pan_pool`` of the split's catalogue clips (sorted by
+# family and name, family ``sit`` left out; cyclic clips looped to ``cli.LOOP_S``), spread
+# (``_spread``) over ``FULL_PANS``. Fixed here because whether a fetched clip stays in place
+# can only be measured where the cache is; test_synth_names checks them against it.
+PAN_CLIPS = {
+    'dev': ('bandai/dataset-1_guide_active_001',
+            'bandai/dataset-2_raise-up-left-hand_elderly_001',
+            'bandai/dataset-1_byebye_giant_001',
+            'bandai/dataset-2_wave-left-hand_youthful_001'),
+    'test': ('bandai/dataset-1_call_normal_002',
+             'bandai/dataset-2_raise-up-left-hand_youthful_002',
+             'bandai/dataset-1_byebye_tired_001',
+             'bandai/dataset-2_wave-left-hand_normal_001'),
+}
 _PEOPLE = (1, 1, 1, 1, 1, 2)  # static pairs of the full suite: every sixth has two people
 _PAN_VIEWS = ('front', 'side', 'back')
 _J = JOINT_INDEX
+T = TypeVar('T')
 
 
-def _spread(pool: Sequence[MotionClip], count: int) -> list[MotionClip]:
+def _spread(pool: Sequence[T], count: int) -> list[T]:
     """``count`` clips evenly spaced over ``pool`` (cycling when it has fewer)."""
     if count <= len(pool):
         return [pool[int((k + 0.5) * len(pool) / count)] for k in range(count)]
@@ -80,6 +104,26 @@ def _reach(pos: npt.NDArray[np.float64], n: int) -> float:
     start = window_start(pos, n, 'active')
     pel = pos[start:start + n, _J['pelvis']][:, [0, 2]]
     return float(np.linalg.norm(pel - pel[0], axis=1).max())
+
+
+def pan_pool(pool: Sequence[MotionClip], pos: dict[str, npt.NDArray[np.float64]],
+             n: int) -> list[MotionClip]:
+    """The clips of ``pool`` a pan pair may show (``pos``: their joints at 30 fps; ``n``:
+    the bag's frames): those of ``PAN_FAMILIES`` whose pelvis stays within ``STILL_M`` of
+    where it starts in their most active window (all of that family if none does, all of
+    ``pool`` if none is of it)."""
+    upright = [c for c in pool if c.family in PAN_FAMILIES] or list(pool)
+    return [c for c in upright if _reach(pos[c.name], n) < STILL_M] or upright
+
+
+def _full_clips(split: str) -> tuple[list[str], list[str]]:
+    """The names of the clips of ``split``'s static and pan pairs in the full suite, from the
+    catalogue alone (module docstring)."""
+    from .mocap.catalogue import CLIPS
+
+    pool = sorted((e for e in CLIPS if e.split == split and e.family != 'sit'),
+                  key=lambda e: (e.family, e.name))
+    return [e.name for e in _spread(pool, FULL_PAIRS)], list(PAN_CLIPS[split])
 
 
 def pair_specs(base: BagSpec, index: int | str, pan: Pan | None = None,
@@ -103,6 +147,24 @@ def pair_specs(base: BagSpec, index: int | str, pan: Pan | None = None,
             for name, room in zip(names, ROOMS)]
 
 
+def _pan_spec(index: int, k: int, clip: MotionClip, order: list[MotionClip], pos: dict,
+              n_pan: int, start_s: float, rng: np.random.Generator, quick: bool,
+              lap: int | None) -> tuple[BagSpec, Pan]:
+    """The base spec and the camera's turn of pan pair ``index``, the ``k``-th of its
+    split."""
+    base = draw_spec(index, clip, order, pos, n_pan, 1, rng, quick, lap=lap)
+    yaw = float(rng.uniform(*PAN_YAW_DEG)) * (1 if rng.random() < 0.5 else -1)
+    pan = Pan(start_s, PAN_DURATION_S, round(yaw, 1))
+    person = base.people[0]
+    view = dataclasses.replace(
+        person.view, kind=_PAN_VIEWS[k % len(_PAN_VIEWS)], offset_x_m=0.0,
+        distance_m=max(person.view.distance_m, PAN_MIN_DISTANCE_M))
+    person = dataclasses.replace(person, view=view,
+                                 start=window_start(pos[clip.name], n_pan, 'active'))
+    attrs = {**base.attributes, 'view': view.kind, 'distance_m': view.distance_m}
+    return dataclasses.replace(base, people=(person,), frames=n_pan, attributes=attrs), pan
+
+
 def rooms_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int = 0,
                 margins: bool = True) -> list[BagSpec]:
     """The suite's bag specs for ``clips``, pair by pair (empty, then furnished), per split
@@ -110,7 +172,9 @@ def rooms_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
     of ``cases.py`` (``ROOMS_QUICK``, ``ROOMS_FULL``; names tagged ``m<kk>``, ending in
     ``-<motion>-<case>``). Clips of family ``sit`` are left
     out: without their chair they would sit on air in the empty room. ``margins``: false
-    renders the bags without the sensors' dead margins (same names)."""
+    renders the bags without the sensors' dead margins (same names). The full suite takes
+    its pairs' clips from the catalogue (module docstring): only the pairs of the clips in
+    ``clips`` are made, numbered as with every clip."""
     if not clips:
         msg = 'the rooms suite needs at least one clip'
         raise ValueError(msg)
@@ -125,36 +189,42 @@ def rooms_specs(clips: Sequence[MotionClip], *, quick: bool = False, seed: int =
     n_pair = QUICK_PAIR_FRAMES if quick else round(PAIR_S * FPS)
     n_pan = QUICK_PAN_FRAMES if quick else round(PAN_BAG_S * FPS)
     start_s = QUICK_PAN_START_S if quick else PAN_START_S
+    loaded = {c.name: c for c in order}
     specs: list[BagSpec] = []
     index = 0
     for split in ('dev', 'test'):
-        pool = sorted((c for c in usable if c.split == split), key=lambda c: (c.family, c.name))
-        if not pool:
-            continue
-        for k, clip in enumerate(_spread(pool, QUICK_PAIRS if quick else FULL_PAIRS)):
-            people = 1 if quick else _PEOPLE[k % len(_PEOPLE)]
-            rng = np.random.default_rng([seed, 11, index])
-            base = draw_spec(index, clip, order, pos, n_pair, people, rng, quick)
-            specs += pair_specs(base, index)
+        if quick:
+            pool = sorted((c for c in usable if c.split == split),
+                          key=lambda c: (c.family, c.name))
+            if not pool:
+                continue
+            statics: list[MotionClip | None] = list(_spread(pool, QUICK_PAIRS))
+            pans: list[MotionClip | None] = list(_spread(pan_pool(pool, pos, n_pan),
+                                                        QUICK_PANS))
+            lap = None
+        else:
+            static_names, pan_names = _full_clips(split)
+            statics = [loaded.get(n) for n in static_names]
+            pans = [loaded.get(n) for n in pan_names]
+            lap = 0  # the cycles start with the pairs, whatever the number of clips loaded
+        for k, clip in enumerate(statics):
+            if clip is not None:
+                people = 1 if quick else _PEOPLE[k % len(_PEOPLE)]
+                rng = np.random.default_rng([seed, 11, index])
+                base = draw_spec(index, clip, order, pos, n_pair, people, rng, quick, lap=lap)
+                specs += pair_specs(base, index)
             index += 1
-        upright = [c for c in pool if c.family in PAN_FAMILIES] or pool
-        still = [c for c in upright if _reach(pos[c.name], n_pan) < STILL_M] or upright
-        for k, clip in enumerate(_spread(still, QUICK_PANS if quick else FULL_PANS)):
-            rng = np.random.default_rng([seed, 11, index])
-            base = draw_spec(index, clip, order, pos, n_pan, 1, rng, quick)
-            yaw = float(rng.uniform(*PAN_YAW_DEG)) * (1 if rng.random() < 0.5 else -1)
-            pan = Pan(start_s, PAN_DURATION_S, round(yaw, 1))
-            person = base.people[0]
-            view = dataclasses.replace(
-                person.view, kind=_PAN_VIEWS[k % len(_PAN_VIEWS)], offset_x_m=0.0,
-                distance_m=max(person.view.distance_m, PAN_MIN_DISTANCE_M))
-            person = dataclasses.replace(person, view=view,
-                                         start=window_start(pos[clip.name], n_pan, 'active'))
-            attrs = {**base.attributes, 'view': view.kind, 'distance_m': view.distance_m}
-            base = dataclasses.replace(base, people=(person,), frames=n_pan, attributes=attrs)
-            specs += pair_specs(base, index, pan)
+        for k, clip in enumerate(pans):
+            if clip is not None:
+                rng = np.random.default_rng([seed, 11, index])
+                base, pan = _pan_spec(index, k, clip, order, pos, n_pan, start_s, rng, quick,
+                                      lap)
+                specs += pair_specs(base, index, pan)
             index += 1
     for k, row, base in case_rows(usable, pos, ROOMS_QUICK if quick else ROOMS_FULL, seed):
         suffix = f'-{base.attributes["motion"]}-{row.label}'
         specs += pair_specs(base, f'm{k:02d}', suffix=suffix)
+    if not specs:
+        msg = 'the full rooms suite needs a clip of the catalogue (mocap/catalogue.py)'
+        raise ValueError(msg)
     return set_margins(specs, margins)
