@@ -590,10 +590,12 @@ def test_tracks_publish_the_part_centre():
 
 
 def test_track_state_age_confidence():
+    """The paper's memory weight as confidence (``scored_confidence`` off)."""
     keep = 4
-    r = run(star_limb_vanishes(5, 7), EndeffParams(keep_frames=keep, max_rectify_distance=REACH),
-            single=False)
-    people = run(hand_to_side(5, 8), EndeffParams(keep_frames=keep), single=False)
+    r = run(star_limb_vanishes(5, 7), EndeffParams(keep_frames=keep, max_rectify_distance=REACH,
+                                                   scored_confidence=False), single=False)
+    people = run(hand_to_side(5, 8), EndeffParams(keep_frames=keep, scored_confidence=False),
+                 single=False)
     for rr in (r, people):
         for i, res in enumerate(rr.results):
             for t in res.tracks:

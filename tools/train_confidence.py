@@ -26,6 +26,7 @@ the paper suite's generic entities drawn with another seed (``endeff synth --onl
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import sys
 from dataclasses import replace
@@ -78,7 +79,9 @@ def collect_bag(bag: Path, out: Path, params: EndeffParams | None = None) -> str
             frame.append(np.full(len(tracks), len(n_gt)))
             paper.append([t.confidence for t in tracks])
             n_gt.append(score.n_gt)
-    name = bag_name(bag)
+    # Bags of the same name from different folders (suites drawn with other seeds) must not
+    # overwrite each other.
+    name = f'{bag_name(bag)}-{hashlib.sha1(str(bag.resolve()).encode()).hexdigest()[:8]}'
     np.savez_compressed(
         out / f'{name}.npz', features=np.concatenate(feats or [np.zeros((0, len(FEATURES)))]),
         right=np.concatenate(right or [np.zeros(0, bool)]),
