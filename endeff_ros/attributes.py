@@ -124,3 +124,15 @@ def attribute_groups(attributes: Sequence[tuple[str, Mapping[str, Any]]]
             order = [f'{key}={label}' for label in _bin_labels(edges)]
             out[key] = {g: out[key][g] for g in order if g in out[key]}
     return {k: out[k] for k in sorted(out)}
+
+
+def group_sections(groups: Mapping[str, Mapping[str, Any]], key: str | None = None,
+                   ) -> list[tuple[str, list[str]]]:
+    """The report's groups in table sections, ``[(title, group names)]``: the paper suite's
+    named groups first (``groups``), then one section per attribute, in report order. With
+    ``key``, only the groups that hold that report key."""
+    sections: dict[str, list[str]] = {}
+    for g, d in groups.items():
+        if key is None or key in d:
+            sections.setdefault(d.get('attribute') or 'groups', []).append(g)
+    return list(sections.items())

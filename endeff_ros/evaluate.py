@@ -35,7 +35,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from endeff_ros.attributes import attribute_groups, custom_data, parse_attributes
+from endeff_ros.attributes import (
+    attribute_groups,
+    custom_data,
+    group_sections,
+    parse_attributes,
+)
 from endeff_ros.bag import progress as prog
 from endeff_ros.bag.errors import BagError
 from endeff_ros.bag.outputs import check_output_option
@@ -490,7 +495,7 @@ def format_table(report: dict[str, Any], *, failed: bool = True) -> str:
         lines.append(f'{s["bag"]:{width}}{split:{split_w}}{s["frames"]:>7}'
                      f'{s["scored_frames"]:>7} | {cols(s["temporal"])} | '
                      f'{cols(s["single_frame"])}')
-    for section, names in _group_sections(groups):
+    for section, names in group_sections(groups):
         lines.append(f'-- {section} ' + '-' * max(0, len(rule) - len(section) - 4))
         for g in names:
             d = groups[g]
@@ -530,15 +535,6 @@ def format_table(report: dict[str, Any], *, failed: bool = True) -> str:
     return '\n'.join(line.rstrip() for line in lines)
 
 
-def _group_sections(groups: dict[str, Any]) -> list[tuple[str, list[str]]]:
-    """``[(section title, group names)]``: the paper groups first, then one per attribute."""
-    sections: dict[str, list[str]] = {}
-    for g, d in groups.items():
-        attribute = d.get('attribute')
-        sections.setdefault(attribute or 'groups', []).append(g)
-    return list(sections.items())
-
-
 def _kind_table(report: dict[str, Any], width: int) -> list[str]:
     """Recall and mean error per kind for overall and each group, in the sections of the main
     table (empty without kinds)."""
@@ -563,7 +559,7 @@ def _kind_table(report: dict[str, Any], width: int) -> list[str]:
         return f'{name:{width}} | ' + ' | '.join(cells)
 
     lines = [head, rule, row('overall', report.get('kinds', {}))]
-    for section, names in _group_sections(groups):
+    for section, names in group_sections(groups):
         shown = [g for g in names if any(groups[g].get('kinds', {}).get(m) for m in METHODS)]
         if shown:
             lines.append(f'-- {section} ' + '-' * max(0, len(rule) - len(section) - 4))

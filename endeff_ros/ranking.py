@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .attributes import group_sections
 from .scoring import KINDS, nanmean
 
 if TYPE_CHECKING:
@@ -211,11 +212,8 @@ def format_table(report: dict[str, Any], width: int) -> list[str]:
                 + f'{_cell(d.get("calibration_error")):>8}{d.get("ends", 0):>9}')
 
     lines = [head, rule]
-    sections: dict[str, list[str]] = {}
-    groups = {g: d for g, d in report.get('groups', {}).items() if 'confidence' in d}
-    for g, d in groups.items():
-        sections.setdefault(d.get('attribute') or 'groups', []).append(g)
-    for section, names in sections.items():
+    groups = report.get('groups', {})
+    for section, names in group_sections(groups, 'confidence'):
         lines.append(f'-- {section} ' + '-' * max(0, len(rule) - len(section) - 4))
         lines += [row(g, groups[g]['confidence']) for g in names]
     lines += [rule, row('overall', overall)]

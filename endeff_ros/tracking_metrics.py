@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .attributes import group_sections
 from .core.assignment import min_cost_assignment
 from .scoring import KINDS, MATCH_THRESHOLD_M, nanmean
 
@@ -294,11 +295,9 @@ def format_tables(report: dict[str, Any], width: int) -> list[str]:
 
     lines = [head, rule]
     lines += [row(s['bag'], s['tracking']) for s in report['sequences'] if 'tracking' in s]
-    groups = {g: d for g, d in report.get('groups', {}).items() if 'tracking' in d}
-    sections: dict[str, list[str]] = {}
-    for g, d in groups.items():
-        sections.setdefault(d.get('attribute') or 'groups', []).append(g)
-    for section, names in sections.items():
+    groups = report.get('groups', {})
+    sections = group_sections(groups, 'tracking')
+    for section, names in sections:
         lines.append(f'-- {section} ' + '-' * max(0, len(rule) - len(section) - 4))
         lines += [row(g, groups[g]['tracking']) for g in names]
     lines += [rule, row('overall', overall)]
@@ -318,7 +317,7 @@ def format_tables(report: dict[str, Any], width: int) -> list[str]:
                 if k in per else ' ' * cell for k in kinds)
 
         lines.append(krow('overall', overall))
-        for section, names in sections.items():
+        for section, names in sections:
             lines.append(f'-- {section} ' + '-' * max(0, len(khead) - len(section) - 4))
             lines += [krow(g, groups[g]['tracking']) for g in names]
     return lines

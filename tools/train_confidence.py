@@ -29,6 +29,7 @@ import argparse
 import hashlib
 import json
 import sys
+import zlib
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -119,6 +120,34 @@ def load(dirs: list[Path]) -> dict[str, Any]:
             'attributes': [json.loads(str(p['attributes'])) for p in parts]}
 
 
+def _clip(name: str) -> str:
+    """The clip a bag is drawn from (its name's middle part; the name for other bags)."""
+    parts = name.split('__')
+    return parts[1] if len(parts) > 2 else name.rsplit('-', 1)[0]
+
+
+def subset(data: dict[str, Any], bags: np.ndarray) -> dict[str, Any]:
+    """The collected ``data`` of the bags where ``bags`` (per bag, bool) holds, renumbered."""
+    index = np.flatnonzero(bags)
+    ends = np.isin(data['bag'], index)
+    renumber = np.full(len(bags), -1)
+    renumber[index] = np.arange(len(index))
+    out = {k: data[k][ends] for k in ('features', 'right', 'paper', 'frame')}
+    out['bag'] = renumber[data['bag'][ends]]
+    for k in ('frames', 'n_gt'):
+        out[k] = data[k][index]
+    for k in ('names', 'attributes'):
+        out[k] = [data[k][i] for i in index]
+    return out
+
+
+def bag_weights(data: dict[str, Any]) -> np.ndarray:
+    """Per end the weight that gives every bag the same total (the mean end weighs 1)."""
+    counts = np.bincount(data['bag'], minlength=len(data['names']))
+    w = 1.0 / counts[data['bag']]
+    return w * len(w) / w.sum()
+
+
 def bin_edges(features: np.ndarray) -> list[np.ndarray]:
     """Per feature its interior cuts: 0.5 for a binary one, else the distinct quantiles."""
     edges = []
@@ -147,11 +176,13 @@ def design(features: np.ndarray, edges: list[np.ndarray]) -> tuple[np.ndarray, l
 
 
 def fit(features: np.ndarray, right: np.ndarray, *, penalty: float = PENALTY,
-        iterations: int = 30) -> ConfidenceModel:
-    """The additive logistic model by Newton's method (L2 on the interval weights)."""
+        weight: np.ndarray | None = None, iterations: int = 30) -> ConfidenceModel:
+    """The additive logistic model by Newton's method (penalties as the module says);
+    ``weight``: per end its weight in the likelihood (None: 1)."""
     edges = bin_edges(features)
     x, offsets = design(features, edges)
     y = right.astype(np.float64)
+    sw = np.ones(len(y)) if weight is None else np.asarray(weight, dtype=np.float64)
     w = np.zeros(x.shape[1])
     # Neighbouring intervals of a feature should not differ without evidence: the penalty is on
     # their differences (a smooth effect per feature) plus a small one on the weights.
@@ -159,14 +190,14 @@ def fit(features: np.ndarray, right: np.ndarray, *, penalty: float = PENALTY,
     for o, e in zip(offsets, edges, strict=True):
         d = np.diff(np.eye(len(e) + 1), axis=0)
         reg[o:o + len(e) + 1, o:o + len(e) + 1] += penalty * d.T @ d
-    prior = min(max(y.mean(), 1e-3), 1 - 1e-3)
+    prior = min(max(np.average(y, weights=sw), 1e-3), 1 - 1e-3)
     b = float(np.log(prior / (1 - prior)))
     for _ in range(iterations):
         z = b + x @ w
         p = 1.0 / (1.0 + np.exp(-z))
-        r = p * (1 - p)
-        g_w = x.T @ (p - y) + reg @ w
-        g_b = float(np.sum(p - y))
+        r = sw * p * (1 - p)
+        g_w = x.T @ (sw * (p - y)) + reg @ w
+        g_b = float(np.sum(sw * (p - y)))
         xr = x * r[:, None].astype(np.float32)
         h_ww = x.T @ xr + reg
         h_wb = xr.sum(axis=0)
@@ -240,6 +271,11 @@ def main(argv: list[str] | None = None) -> int:
     f.add_argument('--model', default=str(MODEL_FILE))
     f.add_argument('--penalty', type=float, default=PENALTY)
     f.add_argument('--json', help='also write the fit report here')
+    f.add_argument('--balance', action='store_true',
+                   help='every bag weighs the same in the fit (default: every end)')
+    f.add_argument('--holdout', action='store_true',
+                   help='fit on half the clips, report on the other half (both ways); '
+                        'writes no model')
     args = parser.parse_args(argv)
     if args.step == 'collect':
         out = Path(args.out)
@@ -256,7 +292,20 @@ def main(argv: list[str] | None = None) -> int:
                 print(_collect(job), file=sys.stderr, flush=True)
         return 0
     data = load([Path(d) for d in args.dirs])
-    model = fit(data['features'], data['right'], penalty=args.penalty)
+    weight = bag_weights(data) if args.balance else None
+    if args.holdout:
+        fold = np.array([zlib.crc32(_clip(n).encode()) % 2 for n in data['names']])
+        for k in (0, 1):
+            train, held = subset(data, fold != k), subset(data, fold == k)
+            m = fit(train['features'], train['right'], penalty=args.penalty,
+                    weight=None if weight is None else weight[np.isin(data['bag'],
+                                                                      np.flatnonzero(fold != k))])
+            c = m(held['features'])
+            print(json.dumps({'held_out_fold': k, 'bags': len(held['names']),
+                              'model': summary(held, c), 'paper': summary(held, held['paper']),
+                              'operating_points': operating_points(held, c)}))
+        return 0
+    model = fit(data['features'], data['right'], penalty=args.penalty, weight=weight)
     Path(args.model).write_text(json.dumps(model.to_json(), indent=1) + '\n', encoding='utf-8')
     conf = model(data['features'])
     report = {'bags': len(data['names']), 'ends': len(data['right']),
