@@ -17,9 +17,11 @@ setup(
          glob('config/*.yaml') + glob('config/*.xml') + glob('config/*.rviz')),
         ('share/' + package_name + '/launch', glob('launch/*.py')),
     ],
-    # The committed motion-capture clips (and their licence notices) and the real frames.
+    # The committed motion-capture clips (and their licence notices), the real frames and the
+    # confidence model.
     package_data={'endeff_ros.synth.mocap': ['data/*/*'],
-                  'endeff_ros.realdata': ['data/*/*']},
+                  'endeff_ros.realdata': ['data/*/*'],
+                  'endeff_ros.core': ['confidence_model.json']},
     install_requires=['setuptools'],
     zip_safe=True,
     maintainer='endeff_ros developers',

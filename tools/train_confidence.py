@@ -207,8 +207,16 @@ def fit(features: np.ndarray, right: np.ndarray, *, penalty: float = PENALTY,
         b -= float(step[-1])
         if np.max(np.abs(step)) < 1e-6:
             break
-    weights = tuple(w[o:o + len(e) + 1] for o, e in zip(offsets, edges, strict=True))
-    return ConfidenceModel(FEATURES, tuple(edges), weights, b)
+    # Each feature's intervals cover every end, so a constant moves freely between a
+    # feature's weights and the bias: centre each feature's weights on its mean over the ends
+    # (the model's output is unchanged; a weight then reads as that interval's effect).
+    weights = []
+    for o, e in zip(offsets, edges, strict=True):
+        block = w[o:o + len(e) + 1]
+        mean = float(np.average(x[:, o:o + len(e) + 1] @ block, weights=sw))
+        weights.append(block - mean)
+        b += mean
+    return ConfidenceModel(FEATURES, tuple(edges), tuple(weights), b)
 
 
 def summary(data: dict[str, Any], confidence: np.ndarray) -> dict[str, float]:

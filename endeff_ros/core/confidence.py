@@ -176,5 +176,10 @@ class ConfidenceModel:
 
     @classmethod
     def load(cls, path: str | Path = MODEL_FILE) -> ConfidenceModel:
-        """The model in ``path`` (default the committed :data:`MODEL_FILE`)."""
-        return cls.from_json(json.loads(Path(path).read_text(encoding='utf-8')))
+        """The model in ``path`` (default the committed :data:`MODEL_FILE`); raises
+        ValueError naming the file when it cannot be read or is malformed."""
+        try:
+            return cls.from_json(json.loads(Path(path).read_text(encoding='utf-8')))
+        except (OSError, ValueError) as err:
+            msg = f'{path}: {err}'
+            raise ValueError(msg) from err

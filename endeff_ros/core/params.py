@@ -277,7 +277,7 @@ class EndeffParams:
                                          'filter starts again there, velocity zero (0: '
                                          'never).', unit='m', lo=0.0, hi=10.0)
     # Confidence: the chance an end is right, scored from its evidence (core/confidence.py).
-    scored_confidence: bool = _p(False, "Publish as confidence the committed model's chance "
+    scored_confidence: bool = _p(True, "Publish as confidence the committed model's chance "
                                  'that the end is right (core/confidence_model.json); off: '
                                  "the paper's memory weight σ^k (T + 1 - m) / (T + 1).")
     min_confidence: float = _p(0.0, 'Publish only end-effectors whose confidence is at least '

@@ -204,7 +204,8 @@ class Tracker:
         self.background = BackgroundModel()
         self.readable = ReadableArea()
         self.kinds = KindLabeller()  # head, hand, foot or other per track (Track.kind)
-        self._confidence_model: ConfidenceModel | None = None  # loaded at the first score
+        # Loaded now when the confidence is scored, so that a broken install fails at start.
+        self._confidence_model = ConfidenceModel.load() if self.params.scored_confidence else None
         self.features = np.zeros((0, 0))  # the last published ends' evidence (end_features)
         self.reset(forget_ids=True)
 
