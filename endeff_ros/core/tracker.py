@@ -36,8 +36,10 @@ Per frame t+1:
    ``α d(e_t) + (1 - α) d(e^pr_{t+1})`` with ``α = σ^k`` while it lives on predictions, k the
    frames since it was last related; a detection takes its current Eq. 7 value.
 
-Each track has a stable id, its entity, age, state (detected / predicted) and a confidence
-``σ^k (T + 1 - m) / (T + 1)`` with m the consecutive unmatched frames (1 for a fresh detection).
+Each track has a stable id, its entity, age, state (detected / predicted) and a confidence:
+the chance that it is right, scored from its evidence (:mod:`.confidence`), or with
+``scored_confidence`` off the paper's memory weight ``σ^k (T + 1 - m) / (T + 1)`` with m the
+consecutive unmatched frames. Ends below ``min_confidence`` are tracked but not returned.
 Its published position is filtered along the track (One Euro, :mod:`.smoothing`), which also
 gives its velocity; the tracker itself follows the raw positions, so the filter's lag never
 enters the matching. A track dropped within ``revive_frames`` gives its id back to a new track
