@@ -84,3 +84,23 @@ def test_min_confidence_hides_ends_but_keeps_tracking_them():
         assert [(t.id, t.confidence) for t in b.tracks] == [
             (t.id, t.confidence) for t in a.tracks if t.confidence >= threshold]
     assert sum(len(a.tracks) for a in every) > sum(len(b.tracks) for b in shown) > 0
+
+
+def test_collect_keeps_every_end_of_every_annotated_frame_and_score_reports_it(room_bag,
+                                                                               tmp_path):
+    """``tools.train_confidence collect`` on a rooms bag with a walking person: one row of
+    evidence per published end of each annotated frame, right where the frame's matching
+    made it a true positive; ``score`` reports the model and the paper's weight on it."""
+    from tools.train_confidence import load, main
+
+    bag, points = room_bag
+    assert main(['collect', str(bag), '--out', str(tmp_path / 'c')]) == 0
+    data = load([tmp_path / 'c'])
+    assert data['n_gt'].sum() == points
+    assert len(data['features']) == len(data['right']) == len(data['frame']) > 0
+    assert data['features'].shape[1] == len(FEATURES)
+    assert 0 < data['right'].sum() < len(data['right'])  # premise: right and wrong ends
+    assert main(['score', str(tmp_path / 'c'), '--json', str(tmp_path / 'r.json')]) == 0
+    report = json.loads((tmp_path / 'r.json').read_text(encoding='utf-8'))
+    assert 0.0 <= report['model']['average_precision'] <= 1.0
+    assert report['ends'] == len(data['right'])
