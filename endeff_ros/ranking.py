@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .attributes import group_sections
+from .core.kinds import KIND_NAMES
 from .scoring import KINDS, nanmean
 
 if TYPE_CHECKING:
@@ -45,26 +46,28 @@ CALIBRATION_BINS = 10
 CURVE_POINTS = 200
 """Points kept of the overall precision-recall curve in the report."""
 
-#: ``Track.kind`` codes (``KIND_*``: 0 other, 1 head, 2 hand, 3 foot) as report kinds.
-_PUBLISHED_KIND = ('other', 'head', 'hand', 'foot')
+def precision_recall(confidence: npt.ArrayLike, right: npt.ArrayLike, n_gt: int
+                     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Recall (over ``n_gt`` ground-truth points) and precision of the ends at or above
+    each distinct ``confidence``, highest first (ends of equal confidence enter together);
+    empty without ends or ground truth."""
+    conf = np.asarray(confidence, dtype=np.float64).reshape(-1)
+    ok = np.asarray(right, dtype=bool).reshape(-1)
+    if len(conf) == 0 or n_gt <= 0:
+        return np.zeros(0), np.zeros(0)
+    order = np.argsort(-conf, kind='stable')
+    conf, ok = conf[order], ok[order]
+    last = np.r_[conf[1:] != conf[:-1], True]  # the last end of each group of equal confidence
+    tp = np.cumsum(ok)[last]
+    return tp / n_gt, tp / (np.flatnonzero(last) + 1)
 
 
 def average_precision(confidence: npt.ArrayLike, right: npt.ArrayLike, n_gt: int) -> float:
     """Area under the precision-recall curve of ends ranked by ``confidence`` (see the
     module), recall over ``n_gt`` ground-truth points; ``nan`` without ground truth."""
-    conf = np.asarray(confidence, dtype=np.float64).reshape(-1)
-    ok = np.asarray(right, dtype=bool).reshape(-1)
     if n_gt <= 0:
         return math.nan
-    if len(conf) == 0:
-        return 0.0
-    order = np.argsort(-conf, kind='stable')
-    conf, ok = conf[order], ok[order]
-    last = np.r_[conf[1:] != conf[:-1], True]  # the last end of each group of equal confidence
-    tp = np.cumsum(ok)[last]
-    n = np.flatnonzero(last) + 1
-    recall = tp / n_gt
-    precision = tp / n
+    recall, precision = precision_recall(confidence, right, n_gt)
     return float(np.sum(np.diff(np.r_[0.0, recall]) * precision))
 
 
@@ -122,7 +125,7 @@ class ConfidenceRanking:
                   else np.full(n_gt, 'other'))
         codes = (np.zeros(len(conf), dtype=np.intp) if published_kind is None
                  else np.asarray(published_kind, dtype=np.intp).reshape(-1))
-        kind = [_PUBLISHED_KIND[c] if 0 <= c < len(_PUBLISHED_KIND) else 'other' for c in codes]
+        kind = [KIND_NAMES[c] if 0 <= c < len(KIND_NAMES) else 'other' for c in codes]
         for end, label in matches.tolist():
             kind[end] = str(labels[label])
         self.confidence += conf.tolist()
@@ -179,17 +182,9 @@ def summary_json(rankings: Sequence[ConfidenceRanking], *, curve: bool = False
 
 def pr_curve(rankings: Sequence[ConfidenceRanking]) -> tuple[npt.NDArray, npt.NDArray]:
     """Pooled precision-recall curve of the sequences' ends (for the plot)."""
-    conf = np.concatenate([np.asarray(r.confidence) for r in rankings] or [np.zeros(0)])
-    right = np.concatenate([np.asarray(r.right, dtype=bool) for r in rankings]
-                           or [np.zeros(0, bool)])
-    n_gt = sum(r.n_gt for r in rankings)
-    if len(conf) == 0 or n_gt == 0:
-        return np.zeros(0), np.zeros(0)
-    order = np.argsort(-conf, kind='stable')
-    conf, right = conf[order], right[order]
-    last = np.r_[conf[1:] != conf[:-1], True]
-    tp = np.cumsum(right)[last]
-    return tp / n_gt, tp / (np.flatnonzero(last) + 1)
+    return precision_recall([c for r in rankings for c in r.confidence],
+                            [ok for r in rankings for ok in r.right],
+                            sum(r.n_gt for r in rankings))
 
 
 def _cell(v: float | None) -> str:

@@ -36,6 +36,7 @@ import json
 import sys
 import zlib
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +51,7 @@ from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.tracker import Tracker
 from endeff_ros.ranking import average_precision, calibration_bins, calibration_error
 from endeff_ros.scoring import score_frame
+from tools.per_bag import run_per_bag
 
 BINS = 8
 """Intervals per continuous feature (cut at quantiles of the training ends)."""
@@ -62,7 +64,7 @@ BINARY = ('detected', 'head', 'hand', 'foot')
 """Features that are 0 or 1: one cut at 0.5."""
 
 
-def collect_bag(bag: Path, out: Path, params: EndeffParams | None = None) -> str:
+def collect_bag(bag: Path, params: EndeffParams | None = None, *, out: Path) -> str:
     """Run the tracker over ``bag`` and write its ends' evidence to ``out/<bag>.npz``."""
     params = replace(params or EndeffParams(), scored_confidence=False, min_confidence=0.0)
     tracker = Tracker(params)
@@ -96,10 +98,6 @@ def collect_bag(bag: Path, out: Path, params: EndeffParams | None = None) -> str
         n_gt=np.asarray(n_gt, dtype=np.int64), names=np.asarray(FEATURES),
         attributes=json.dumps(attributes))
     return name
-
-
-def _collect(job: tuple[Path, Path]) -> str:
-    return collect_bag(*job)
 
 
 def load(dirs: list[Path]) -> dict[str, Any]:
@@ -312,16 +310,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.step == 'collect':
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
-        work = [(b, out) for b in sorted(find_bags(args.bags))]
-        if args.jobs > 1:
-            import multiprocessing
-
-            with multiprocessing.get_context('spawn').Pool(args.jobs) as pool:
-                for name in pool.imap_unordered(_collect, work):
-                    print(name, file=sys.stderr, flush=True)
-        else:
-            for job in work:
-                print(_collect(job), file=sys.stderr, flush=True)
+        names = run_per_bag(partial(collect_bag, out=out), sorted(find_bags(args.bags)), None,
+                            args.jobs)
+        print('\n'.join(names), file=sys.stderr)
         return 0
     data = load([Path(d) for d in args.dirs])
     if args.step == 'score':

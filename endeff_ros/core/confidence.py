@@ -52,6 +52,7 @@ FEATURES = ('age', 'hit_ratio', 'detected', 'not_related', 'missed', 'geodesic',
             'nearest_end', 'entity_size', 'height', 'border', 'speed', 'moved', 'head', 'hand',
             'foot')
 """Feature names, in column order of :func:`end_features`."""
+_COLUMN = {name: i for i, name in enumerate(FEATURES)}
 
 _HORIZON = 30  # frames: longer histories are alike (a second at 30 Hz)
 NO_FLOOR = -1.0
@@ -73,7 +74,7 @@ def end_features(published: Sequence[Track], states: Sequence[Any],
     entity = np.array([t.entity for t in published])
     geo = np.array([t.geodesic for t in published], dtype=np.float64)
     age = np.array([s.age for s in states], dtype=np.float64)
-    col = {name: i for i, name in enumerate(FEATURES)}
+    col = _COLUMN
     out[:, col['age']] = np.log1p(np.minimum(age, 10 * _HORIZON))
     out[:, col['hit_ratio']] = np.array([s.hits for s in states]) / np.maximum(age, 1)
     out[:, col['detected']] = [float(s.detected) for s in states]
@@ -136,9 +137,8 @@ class ConfidenceModel:
     def logit(self, features: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """The model's log-odds of (M, F) ``features`` (columns in :data:`FEATURES` order)."""
         z = np.full(len(features), self.bias)
-        col = {name: i for i, name in enumerate(FEATURES)}
         for name, edges, weights in zip(self.names, self.edges, self.weights, strict=True):
-            z += weights[np.searchsorted(edges, features[:, col[name]], side='right')]
+            z += weights[np.searchsorted(edges, features[:, _COLUMN[name]], side='right')]
         return z
 
     def __call__(self, features: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
