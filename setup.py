@@ -18,10 +18,10 @@ setup(
         ('share/' + package_name + '/launch', glob('launch/*.py')),
     ],
     # The committed motion-capture clips (and their licence notices), the real frames and the
-    # confidence model.
+    # confidence and kind models.
     package_data={'endeff_ros.synth.mocap': ['data/*/*'],
                   'endeff_ros.realdata': ['data/*/*'],
-                  'endeff_ros.core': ['confidence_model.json']},
+                  'endeff_ros.core': ['confidence_model.json', 'kind_model.json']},
     install_requires=['setuptools'],
     zip_safe=True,
     maintainer='endeff_ros developers',

@@ -213,3 +213,107 @@ def test_tracked_generic_entities_are_other(sequence):
     matched, right, _ = _synthetic_kinds(sequence)
     assert matched >= 5
     assert right >= 0.95 * matched
+
+
+# -- the person and head models (scored_kinds) ----------------------------------------------
+
+
+@pytest.fixture(scope='module')
+def models():
+    from endeff_ros.core.kinds import KindModels
+
+    return KindModels.load()
+
+
+def _scored(ends: list[tuple[list[float], float]], shape: EntityShape, models) -> list[int]:
+    pos = np.array([p for p, _ in ends])
+    geo = np.array([g for _, g in ends])
+    return frame_kinds(pos, geo, np.zeros(len(ends), dtype=np.intp), {0: shape}, UP, FLOOR,
+                       models=models).tolist()
+
+
+def test_the_models_give_a_standing_person_a_head_hands_and_feet(models):
+    shape = STANDING._replace(root=tuple(_at(0.0, 1.0)))
+    ends = [(_at(0.0, 1.6), 0.6), (_at(-0.6, 1.0), 0.85), (_at(0.6, 1.1), 0.85),
+            (_at(-0.15, 0.08), 1.0), (_at(0.15, 0.08), 1.0)]
+    assert _scored(ends, shape, models) == [HEAD, HAND, HAND, FOOT, FOOT]
+    raised = [(_at(0.35, 2.0), 1.25), (_at(0.0, 1.6), 0.62), (_at(-0.3, 0.9), 0.8),
+              (_at(-0.15, 0.08), 1.0), (_at(0.15, 0.08), 1.0)]
+    assert _scored(raised, shape, models) == [HAND, HEAD, HAND, FOOT, FOOT]
+
+
+def test_the_models_leave_a_chair_and_a_robot_arm_other(models):
+    chair = EntityShape(root_height=0.45, bottom=0.0, top=0.96, on_floor=True,
+                        root=tuple(_at(0.0, 0.45)))
+    legs = [(_at(x, 0.03, z), 0.5) for x in (-0.2, 0.2) for z in (2.8, 3.2)]
+    back = [(_at(x, 0.96, 3.2), 0.6) for x in (-0.23, 0.23)]
+    assert _scored(legs + back, chair, models) == [OTHER] * 6
+    arm = EntityShape(root_height=0.6, bottom=0.0, top=1.35, on_floor=True,
+                      root=tuple(_at(0.0, 0.6)))
+    assert _scored([(_at(0.4, 1.3), 1.0), (_at(0.0, 0.03), 0.6)], arm, models) == [OTHER] * 2
+
+
+def test_hands_of_a_person_behind_a_table_are_no_feet():
+    """A table hides the legs: what is in view rests on nothing (its lowest points 0.75 m
+    above the floor). Its lowest ends are hands on the table, not feet: for such an entity
+    only an end by the floor is a foot (as for a body the image's border cuts)."""
+    from endeff_ros.core.kinds import kind_evidence
+
+    seated = EntityShape(root_height=1.0, bottom=0.75, top=1.75, on_floor=True)
+    ends = np.array([_at(0.0, 1.62), _at(-0.45, 0.78), _at(0.45, 0.8), _at(0.2, 0.1)])
+    ev = kind_evidence(ends, np.array([0.62, 0.9, 0.9, 1.1]), np.zeros(4, dtype=np.intp),
+                       {0: seated}, UP, FLOOR)
+    # In the lowest 30 % of the span in view and below the root, yet hands; a foot seen
+    # below the table is by the floor.
+    assert ev.low.tolist() == [False, False, False, True]
+
+
+def test_the_replay_of_the_evidence_gives_the_kinds_label_gives(models):
+    """``label_evidence`` (the offline replay of tools.train_kinds) from the evidence that
+    ``label_shapes`` kept gives the same kinds, vote history included."""
+    from endeff_ros.core.floor import FloorPlane
+
+    live, replay = KindLabeller(models=models), KindLabeller(models=models)
+    live.see_floor(FloorPlane(UP, FLOOR))
+    shape = STANDING._replace(root=tuple(_at(0.0, 1.0)))
+    for frame in range(1, 40):
+        tracks = _person(frame, 0.08 if frame < 20 else 0.9)
+        out = live.label_shapes(tracks, {0: shape})
+        again = replay.label_evidence([t.id for t in tracks], [t.age for t in tracks],
+                                      live.evidence)
+        assert again == [t.kind for t in out]
+
+
+def test_a_broken_kind_model_file_is_named(tmp_path):
+    from endeff_ros.core.kinds import KindModels
+
+    broken = tmp_path / 'kinds.json'
+    broken.write_text('{"person": {"bias": 0, "features": []}}', encoding='utf-8')
+    with pytest.raises(ValueError, match='kinds.json'):
+        KindModels.load(broken)
+    with pytest.raises(ValueError, match='nowhere.json'):
+        KindModels.load(tmp_path / 'nowhere.json')
+
+
+def test_train_kinds_collects_fits_and_replays_a_rooms_bag(room_bag, tmp_path):
+    """``tools.train_kinds``: collect keeps every published end of every frame with its
+    evidence and truth; fit writes models that load; the replay's confusion counts the
+    matched ends of people."""
+    import json
+
+    from endeff_ros.core.kinds import KindModels
+    from tools.train_kinds import load, main
+
+    bag, _ = room_bag
+    assert main(['collect', str(bag), '--out', str(tmp_path / 'c')]) == 0
+    (data,) = load([tmp_path / 'c'])
+    assert len(data['person']) == len(data['head']) == len(data['truth']) > 0
+    matched = int(np.count_nonzero(data['truth'] >= 1))
+    assert matched > 0  # premise: ends matched to the walking person
+    model = tmp_path / 'm.json'
+    assert main(['fit', str(tmp_path / 'c'), '--model', str(model), '--json',
+                 str(tmp_path / 'r.json')]) == 0
+    KindModels.load(model)
+    report = json.loads((tmp_path / 'r.json').read_text(encoding='utf-8'))
+    assert report['models']['matched'] == report['rules']['matched'] == matched
+    assert 0.0 <= report['models']['accuracy'] <= 1.0

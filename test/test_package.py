@@ -105,9 +105,10 @@ def test_colcon_install_layout_matches_ros2_run(install: Path,
     assert launch_dst == launch_src, 'launch files missing from the install'
     site = _site_packages(prefix)
     assert (site / PACKAGE / 'core' / 'flow.py').is_file()
-    # The published confidence's model (package data, read at run time).
-    assert (site / PACKAGE / 'core' / 'confidence_model.json').read_bytes() == (
-        REPO / PACKAGE / 'core' / 'confidence_model.json').read_bytes()
+    # The published confidence's and kinds' models (package data, read at run time).
+    for model in ('confidence_model.json', 'kind_model.json'):
+        assert (site / PACKAGE / 'core' / model).read_bytes() == (
+            REPO / PACKAGE / 'core' / model).read_bytes()
     assert not (site / 'test').exists(), 'the test directory must not be installed'
     assert not (site / 'tools').exists(), 'development tools must not be installed'
     tool_modules = {p.stem for p in (REPO / 'tools').glob('*.py')} - {'__init__'}

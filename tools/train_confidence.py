@@ -51,6 +51,7 @@ from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.tracker import Tracker
 from endeff_ros.ranking import average_precision, calibration_bins, calibration_error
 from endeff_ros.scoring import score_frame
+from tools import additive_fit
 from tools.per_bag import run_per_bag
 
 BINS = 8
@@ -123,7 +124,7 @@ def load(dirs: list[Path]) -> dict[str, Any]:
             'attributes': [json.loads(str(p['attributes'])) for p in parts]}
 
 
-def _clip(name: str) -> str:
+def clip_of(name: str) -> str:
     """The clip a bag is drawn from (its name's middle part; the name for other bags)."""
     parts = name.split('__')
     return parts[1] if len(parts) > 2 else name.rsplit('-', 1)[0]
@@ -151,75 +152,12 @@ def bag_weights(data: dict[str, Any]) -> np.ndarray:
     return w * len(w) / w.sum()
 
 
-def bin_edges(features: np.ndarray) -> list[np.ndarray]:
-    """Per feature its interior cuts: 0.5 for a binary one, else the distinct quantiles."""
-    edges = []
-    for k, name in enumerate(FEATURES):
-        if name in BINARY:
-            edges.append(np.array([0.5]))
-            continue
-        q = np.quantile(features[:, k], np.linspace(0, 1, BINS + 1)[1:-1])
-        if name == 'height':  # no floor known: an interval of its own
-            q = np.r_[NO_FLOOR + 0.5, q[q > NO_FLOOR + 0.5]]
-        edges.append(np.unique(q))
-    return edges
-
-
-def design(features: np.ndarray, edges: list[np.ndarray]) -> tuple[np.ndarray, list[int]]:
-    """One-hot interval indicators of every feature, (M, sum of intervals), float32."""
-    cols, offsets, start = [], [], 0
-    for k, e in enumerate(edges):
-        b = np.searchsorted(e, features[:, k], side='right')
-        one = np.zeros((len(features), len(e) + 1), dtype=np.float32)
-        one[np.arange(len(features)), b] = 1.0
-        cols.append(one)
-        offsets.append(start)
-        start += len(e) + 1
-    return np.concatenate(cols, axis=1), offsets
-
-
 def fit(features: np.ndarray, right: np.ndarray, *, penalty: float = PENALTY,
-        weight: np.ndarray | None = None, iterations: int = 30) -> ConfidenceModel:
-    """The additive logistic model by Newton's method (penalties as the module says);
-    ``weight``: per end its weight in the likelihood (None: 1)."""
-    edges = bin_edges(features)
-    x, offsets = design(features, edges)
-    y = right.astype(np.float64)
-    sw = np.ones(len(y)) if weight is None else np.asarray(weight, dtype=np.float64)
-    w = np.zeros(x.shape[1])
-    # Neighbouring intervals of a feature should not differ without evidence: the penalty is on
-    # their differences (a smooth effect per feature) plus a small one on the weights.
-    reg = RIDGE * np.eye(len(w))
-    for o, e in zip(offsets, edges, strict=True):
-        d = np.diff(np.eye(len(e) + 1), axis=0)
-        reg[o:o + len(e) + 1, o:o + len(e) + 1] += penalty * d.T @ d
-    prior = min(max(np.average(y, weights=sw), 1e-3), 1 - 1e-3)
-    b = float(np.log(prior / (1 - prior)))
-    for _ in range(iterations):
-        z = b + x @ w
-        p = 1.0 / (1.0 + np.exp(-z))
-        r = sw * p * (1 - p)
-        g_w = x.T @ (sw * (p - y)) + reg @ w
-        g_b = float(np.sum(sw * (p - y)))
-        xr = x * r[:, None].astype(np.float32)
-        h_ww = x.T @ xr + reg
-        h_wb = xr.sum(axis=0)
-        h = np.block([[h_ww, h_wb[:, None]], [h_wb[None, :], np.array([[r.sum()]])]])
-        step = np.linalg.solve(h, np.r_[g_w, g_b])
-        w -= step[:-1]
-        b -= float(step[-1])
-        if np.max(np.abs(step)) < 1e-6:
-            break
-    # Each feature's intervals cover every end, so a constant moves freely between a
-    # feature's weights and the bias: centre each feature's weights on its mean over the ends
-    # (the model's output is unchanged; a weight then reads as that interval's effect).
-    weights = []
-    for o, e in zip(offsets, edges, strict=True):
-        block = w[o:o + len(e) + 1]
-        mean = float(np.average(x[:, o:o + len(e) + 1] @ block, weights=sw))
-        weights.append(block - mean)
-        b += mean
-    return ConfidenceModel(FEATURES, tuple(edges), tuple(weights), b)
+        weight: np.ndarray | None = None) -> ConfidenceModel:
+    """The confidence model fitted to ``features`` (:func:`tools.additive_fit.fit`)."""
+    return additive_fit.fit(ConfidenceModel, features, right, binary=BINARY, bins=BINS,
+                            penalty=penalty, ridge=RIDGE, sentinels={'height': NO_FLOOR},
+                            weight=weight)
 
 
 def summary(data: dict[str, Any], confidence: np.ndarray) -> dict[str, float]:
@@ -320,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     weight = bag_weights(data) if args.balance else None
     if args.holdout:
-        fold = np.array([zlib.crc32(_clip(n).encode()) % 2 for n in data['names']])
+        fold = np.array([zlib.crc32(clip_of(n).encode()) % 2 for n in data['names']])
         folds = []
         for k in (0, 1):
             train, held = subset(data, fold != k), subset(data, fold == k)

@@ -29,12 +29,12 @@ numbers, :data:`MODEL_FILE`), evaluated with numpy, and reproduced by
 
 from __future__ import annotations
 
-import json
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from .additive import AdditiveModel, read_json
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -125,61 +125,20 @@ def end_features(published: Sequence[Track], states: Sequence[Any],
     return out
 
 
-@dataclass(frozen=True)
-class ConfidenceModel:
-    """Additive logistic model over binned features (see the module)."""
+class ConfidenceModel(AdditiveModel):
+    """The additive logistic model of the published confidence (see the module), over the
+    columns of :func:`end_features`."""
 
-    names: tuple[str, ...]
-    edges: tuple[npt.NDArray[np.float64], ...]  # per feature, its interior bin edges
-    weights: tuple[npt.NDArray[np.float64], ...]  # per feature, len(edges) + 1 weights
-    bias: float
-
-    def logit(self, features: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """The model's log-odds of (M, F) ``features`` (columns in :data:`FEATURES` order)."""
-        z = np.full(len(features), self.bias)
-        for name, edges, weights in zip(self.names, self.edges, self.weights, strict=True):
-            z += weights[np.searchsorted(edges, features[:, _COLUMN[name]], side='right')]
-        return z
-
-    def __call__(self, features: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """Confidence in [0, 1] per row of ``features``."""
-        return 1.0 / (1.0 + np.exp(-self.logit(features)))
-
-    def to_json(self) -> dict[str, Any]:
-        """The model file's content."""
-        return {'bias': self.bias,
-                'features': [{'name': n, 'edges': e.tolist(), 'weights': w.tolist()}
-                             for n, e, w in zip(self.names, self.edges, self.weights,
-                                                strict=True)]}
-
-    @classmethod
-    def from_json(cls, data: dict[str, Any]) -> ConfidenceModel:
-        """A model from :meth:`to_json`'s form; raises ValueError on a malformed one."""
-        try:
-            feats = data['features']
-            names = tuple(str(f['name']) for f in feats)
-            edges = tuple(np.asarray(f['edges'], dtype=np.float64) for f in feats)
-            weights = tuple(np.asarray(f['weights'], dtype=np.float64) for f in feats)
-            bias = float(data['bias'])
-        except (KeyError, TypeError) as err:
-            msg = f'confidence model: missing or malformed field ({err})'
-            raise ValueError(msg) from err
-        unknown = sorted(set(names) - set(FEATURES))
-        if unknown:
-            msg = f'confidence model: unknown features {unknown}'
-            raise ValueError(msg)
-        for n, e, w in zip(names, edges, weights, strict=True):
-            if len(w) != len(e) + 1 or np.any(np.diff(e) < 0):
-                msg = f'confidence model: feature {n} has {len(e)} edges and {len(w)} weights'
-                raise ValueError(msg)
-        return cls(names, edges, weights, bias)
+    COLUMNS = FEATURES
+    WHAT = 'confidence'
 
     @classmethod
     def load(cls, path: str | Path = MODEL_FILE) -> ConfidenceModel:
         """The model in ``path`` (default the committed :data:`MODEL_FILE`); raises
         ValueError naming the file when it cannot be read or is malformed."""
+        data = read_json(path)
         try:
-            return cls.from_json(json.loads(Path(path).read_text(encoding='utf-8')))
-        except (OSError, ValueError) as err:
+            return cls.from_json(data)
+        except ValueError as err:
             msg = f'{path}: {err}'
             raise ValueError(msg) from err

@@ -280,6 +280,9 @@ class EndeffParams:
     scored_confidence: bool = _p(True, "Publish as confidence the committed model's chance "
                                  'that the end is right (core/confidence_model.json); off: '
                                  "the paper's memory weight σ^k (T + 1 - m) / (T + 1).")
+    scored_kinds: bool = _p(True, "Decide which ends are people's and which is the head with "
+                            'the committed person and head models (core/kind_model.json); '
+                            'off: the geometric rules of core/kinds.py alone.')
     min_confidence: float = _p(0.0, 'Publish only end-effectors whose confidence is at least '
                                'this (the operating point between recall and false ends); '
                                'the others are still tracked.', lo=0.0, hi=1.0)
