@@ -284,10 +284,18 @@ def _worker_main(conn: Any, parent_pid: int, initializer: Callable[..., None] | 
         sys.exit(1)
 
 
-def _on_sigterm(signum: int, _frame: Any) -> None:
+def _on_sigterm(signum: int, frame: Any) -> None:
     """SIGTERM in a worker: unwind (Terminated), once. A second SIGTERM (sent to the process
     group and by the parent) is ignored so that it cannot break the cleanup of the first; a
-    worker that does not end is killed by the parent after the grace period."""
+    worker that does not end is killed by the parent after the grace period.
+
+    Raised inside the import machinery (a module lock's weakref callback, run whenever the
+    collector frees one), the exception would be printed with its traceback and swallowed,
+    the worker going on until it is killed: the signal is sent again, to be taken once that
+    code has returned."""
+    if frame is not None and frame.f_code.co_filename.startswith('<frozen importlib'):
+        os.kill(os.getpid(), signum)
+        return
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     raise Terminated(signum)
 

@@ -190,3 +190,25 @@ def test_synth_ends_with_its_workers(tmp_path: Path, sig: int, group: bool) -> N
         depth = [t['message_count'] for t in info['topics_with_message_count']
                  if t['topic_metadata']['name'].endswith('depth/image_raw')]
         assert depth == [QUICK_FRAMES], f'{bag.name} is not complete: {depth}'
+
+
+def test_a_worker_sigterm_inside_the_import_machinery_is_taken_after_it(monkeypatch) -> None:
+    """A SIGTERM that lands in the import machinery's weakref callback would be printed and
+    swallowed there: the worker's handler sends it again instead of raising; anywhere else it
+    unwinds the worker (Terminated)."""
+    import types
+
+    from endeff_ros import workers
+    from endeff_ros.cli_common import Terminated
+
+    sent = []
+    monkeypatch.setattr(workers.os, 'kill', lambda pid, sig: sent.append((pid, sig)))
+    monkeypatch.setattr(workers.signal, 'signal', lambda *args: None)
+    in_import = types.SimpleNamespace(
+        f_code=types.SimpleNamespace(co_filename='<frozen importlib._bootstrap>'))
+    workers._on_sigterm(signal.SIGTERM, in_import)
+    assert sent == [(os.getpid(), signal.SIGTERM)]
+    elsewhere = types.SimpleNamespace(f_code=types.SimpleNamespace(co_filename=__file__))
+    with pytest.raises(Terminated):
+        workers._on_sigterm(signal.SIGTERM, elsewhere)
+    assert len(sent) == 1
