@@ -9,11 +9,20 @@ small one on the weights (the fit stays defined where a feature is constant).
 
 from __future__ import annotations
 
-from typing import TypeVar
+import argparse
+import json
+import sys
+from collections.abc import Callable
+from functools import partial
+from pathlib import Path
+from typing import Any, TypeVar
 
 import numpy as np
 
+from endeff_ros.bag.reader import find_bags
+from endeff_ros.cli_common import positive_int
 from endeff_ros.core.additive import AdditiveModel
+from tools.per_bag import run_per_bag
 
 M = TypeVar('M', bound=AdditiveModel)
 
@@ -91,3 +100,55 @@ def fit(cls: type[M], features: np.ndarray, target: np.ndarray, *, bins: int,
         weights.append(block - mean)
         b += mean
     return cls(cls.COLUMNS, tuple(edges), tuple(weights), b)
+
+
+# -- the command line of the two-step fitting tools (tools.train_confidence, train_kinds) ----
+
+def steps_parser(doc: str, model_file: Path, what: str) -> tuple[argparse.ArgumentParser,
+                                                                   argparse.ArgumentParser]:
+    """The ``collect`` / ``fit`` / ``score`` command line of a fitting tool (``doc``: its
+    docstring; ``model_file``: the committed model, the default output and input; ``what``:
+    what the model is, for the help); returns the parser and the ``fit`` step's, for the
+    tool's own options."""
+    parser = argparse.ArgumentParser(description=doc.split('\n')[0])
+    sub = parser.add_subparsers(dest='step', required=True)
+    c = sub.add_parser('collect', help="run the tracker over bags, keep each end's evidence")
+    c.add_argument('bags', nargs='+')
+    c.add_argument('--out', required=True)
+    c.add_argument('--jobs', type=positive_int, default=1)
+    f = sub.add_parser('fit', help=f'fit the {what} on collected bags')
+    f.add_argument('dirs', nargs='+')
+    f.add_argument('--model', default=str(model_file))
+    f.add_argument('--json', help='also write the report here')
+    f.add_argument('--holdout', action='store_true',
+                   help='fit on half the clips, report on the other half (both ways); '
+                        'writes no model')
+    r = sub.add_parser('score', help=f'report the {what} on collected bags (not their own)')
+    r.add_argument('dirs', nargs='+')
+    r.add_argument('--model', default=str(model_file))
+    r.add_argument('--json', help='also write the report here')
+    return parser, f
+
+
+def collect(collect_bag: Callable[..., str], args: argparse.Namespace) -> int:
+    """The ``collect`` step: ``collect_bag(bag, params, out=DIR)`` over every bag of
+    ``args.bags`` (in ``args.jobs`` processes), the names written listed on stderr."""
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    names = run_per_bag(partial(collect_bag, out=out), sorted(find_bags(args.bags)), None,
+                        args.jobs)
+    print('\n'.join(names), file=sys.stderr)
+    return 0
+
+
+def write_model(model: Any, path: str) -> None:
+    """Write ``model`` (its ``to_json``) to ``path``."""
+    Path(path).write_text(json.dumps(model.to_json(), indent=1) + '\n', encoding='utf-8')
+
+
+def print_report(result: dict[str, Any], out: str | None) -> None:
+    """Print the report, and write it to ``out`` too when given."""
+    text = json.dumps(result, indent=1)
+    print(text)
+    if out:
+        Path(out).write_text(text + '\n', encoding='utf-8')

@@ -30,21 +30,18 @@ stars too.
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import sys
 import zlib
 from dataclasses import replace
-from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from endeff_ros.attributes import custom_data, parse_attributes
-from endeff_ros.bag.reader import BagReader, bag_name, find_bags
-from endeff_ros.cli_common import positive_int
+from endeff_ros.bag.reader import BagReader, bag_name
 from endeff_ros.core.confidence import FEATURES, MODEL_FILE, NO_FLOOR, ConfidenceModel
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
@@ -52,7 +49,6 @@ from endeff_ros.core.tracker import Tracker
 from endeff_ros.ranking import average_precision, calibration_bins, calibration_error
 from endeff_ros.scoring import score_frame
 from tools import additive_fit
-from tools.per_bag import run_per_bag
 
 BINS = 8
 """Intervals per continuous feature (cut at quantiles of the training ends)."""
@@ -216,45 +212,18 @@ def report(data: dict[str, Any], confidence: np.ndarray) -> dict[str, Any]:
             'operating_points': operating_points(data, confidence)}
 
 
-def _print(result: dict[str, Any], out: str | None) -> None:
-    text = json.dumps(result, indent=1)
-    print(text)
-    if out:
-        Path(out).write_text(text + '\n', encoding='utf-8')
-
-
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    sub = parser.add_subparsers(dest='step', required=True)
-    c = sub.add_parser('collect', help="run the tracker over bags, keep each end's evidence")
-    c.add_argument('bags', nargs='+')
-    c.add_argument('--out', required=True)
-    c.add_argument('--jobs', type=positive_int, default=1)
-    f = sub.add_parser('fit', help='fit the model on collected bags')
-    f.add_argument('dirs', nargs='+')
-    f.add_argument('--model', default=str(MODEL_FILE))
+    parser, f = additive_fit.steps_parser(__doc__, MODEL_FILE, 'model')
     f.add_argument('--penalty', type=float, default=PENALTY)
-    f.add_argument('--json', help='also write the report here')
     f.add_argument('--balance', action='store_true',
                    help='every bag weighs the same in the fit (default: every end)')
-    f.add_argument('--holdout', action='store_true',
-                   help='fit on half the clips, report on the other half (both ways); '
-                        'writes no model')
-    r = sub.add_parser('score', help='report a model on collected bags (other than its own)')
-    r.add_argument('dirs', nargs='+')
-    r.add_argument('--model', default=str(MODEL_FILE))
-    r.add_argument('--json', help='also write the report here')
     args = parser.parse_args(argv)
     if args.step == 'collect':
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        names = run_per_bag(partial(collect_bag, out=out), sorted(find_bags(args.bags)), None,
-                            args.jobs)
-        print('\n'.join(names), file=sys.stderr)
-        return 0
+        return additive_fit.collect(collect_bag, args)
     data = load([Path(d) for d in args.dirs])
     if args.step == 'score':
-        _print(report(data, ConfidenceModel.load(args.model)(data['features'])), args.json)
+        additive_fit.print_report(report(data, ConfidenceModel.load(args.model)(
+            data['features'])), args.json)
         return 0
     weight = bag_weights(data) if args.balance else None
     if args.holdout:
@@ -266,11 +235,11 @@ def main(argv: list[str] | None = None) -> int:
                     weight=None if weight is None else weight[np.isin(data['bag'],
                                                                       np.flatnonzero(fold != k))])
             folds.append({'held_out_fold': k, **report(held, m(held['features']))})
-        _print({'folds': folds}, args.json)
+        additive_fit.print_report({'folds': folds}, args.json)
         return 0
     model = fit(data['features'], data['right'], penalty=args.penalty, weight=weight)
-    Path(args.model).write_text(json.dumps(model.to_json(), indent=1) + '\n', encoding='utf-8')
-    _print(report(data, model(data['features'])), args.json)
+    additive_fit.write_model(model, args.model)
+    additive_fit.print_report(report(data, model(data['features'])), args.json)
     return 0
 
 

@@ -26,21 +26,18 @@ robot arms, stars, two people).
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import sys
 import zlib
 from dataclasses import replace
-from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from endeff_ros.attributes import custom_data, parse_attributes
-from endeff_ros.bag.reader import BagReader, bag_name, find_bags
-from endeff_ros.cli_common import positive_int
+from endeff_ros.bag.reader import BagReader, bag_name
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.kinds import (
     HEAD_FEATURES,
@@ -59,7 +56,6 @@ from endeff_ros.core.tracker import Tracker
 from endeff_ros.evaluate import gt_ids, is_person_sequence
 from endeff_ros.scoring import kinds_of_ids, score_frame
 from tools import additive_fit
-from tools.per_bag import run_per_bag
 from tools.train_confidence import clip_of
 
 BINS = 8
@@ -214,54 +210,26 @@ def report(bags: list[dict[str, Any]], models: KindModels) -> dict[str, Any]:
     return {'bags': len(bags), 'models': accuracy(bags, models), 'rules': accuracy(bags, None)}
 
 
-def _print(result: dict[str, Any], out: str | None) -> None:
-    text = json.dumps(result, indent=1)
-    print(text)
-    if out:
-        Path(out).write_text(text + '\n', encoding='utf-8')
-
-
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    sub = parser.add_subparsers(dest='step', required=True)
-    c = sub.add_parser('collect', help="run the tracker over bags, keep each end's evidence")
-    c.add_argument('bags', nargs='+')
-    c.add_argument('--out', required=True)
-    c.add_argument('--jobs', type=positive_int, default=1)
-    f = sub.add_parser('fit', help='fit the models on collected bags')
-    f.add_argument('dirs', nargs='+')
-    f.add_argument('--model', default=str(KIND_MODEL_FILE))
+    parser, f = additive_fit.steps_parser(__doc__, KIND_MODEL_FILE, 'person and head models')
     f.add_argument('--penalty', type=float, default=PENALTY)
-    f.add_argument('--json', help='also write the report here')
-    f.add_argument('--holdout', action='store_true',
-                   help='fit on half the clips, report on the other half (both ways); '
-                        'writes no model')
-    r = sub.add_parser('score', help='report the models on collected bags (other than their own)')
-    r.add_argument('dirs', nargs='+')
-    r.add_argument('--model', default=str(KIND_MODEL_FILE))
-    r.add_argument('--json', help='also write the report here')
     args = parser.parse_args(argv)
     if args.step == 'collect':
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        names = run_per_bag(partial(collect_bag, out=out), sorted(find_bags(args.bags)), None,
-                            args.jobs)
-        print('\n'.join(names), file=sys.stderr)
-        return 0
+        return additive_fit.collect(collect_bag, args)
     bags = load([Path(d) for d in args.dirs])
     if args.step == 'score':
-        _print(report(bags, KindModels.load(args.model)), args.json)
+        additive_fit.print_report(report(bags, KindModels.load(args.model)), args.json)
         return 0
     if args.holdout:
         fold = [zlib.crc32(clip_of(b['name']).encode()) % 2 for b in bags]
-        _print({'folds': [{'held_out_fold': k, **report(
+        additive_fit.print_report({'folds': [{'held_out_fold': k, **report(
             [b for b, f in zip(bags, fold, strict=True) if f == k],
             fit([b for b, f in zip(bags, fold, strict=True) if f != k], penalty=args.penalty))}
             for k in (0, 1)]}, args.json)
         return 0
     models = fit(bags, penalty=args.penalty)
-    Path(args.model).write_text(json.dumps(models.to_json(), indent=1) + '\n', encoding='utf-8')
-    _print(report(bags, models), args.json)
+    additive_fit.write_model(models, args.model)
+    additive_fit.print_report(report(bags, models), args.json)
     return 0
 
 
