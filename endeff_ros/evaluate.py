@@ -116,19 +116,16 @@ def _background_estimate() -> EstimateFn:
     """The default single-frame estimator with its own static background (one per bag, as
     the tracker has), so both estimators see the same foreground."""
     from endeff_ros.core.background import BackgroundModel
-    from endeff_ros.core.kinds import KindLabeller, KindModels, person_candidates
+    from endeff_ros.core.kinds import KindLabeller, person_candidates
     from endeff_ros.core.single_frame import estimate_frame
 
     model, labeller = BackgroundModel(), KindLabeller()
-    models: list[KindModels] = []  # loaded when first needed (scored_kinds)
 
     def estimate(frame: RGBDFrame, params: EndeffParams | None) -> Any:
         params = params or EndeffParams()
         if not params.background:
             return estimate_frame(frame, params)
-        if params.scored_kinds and not models:
-            models.append(KindModels.load())
-        labeller.models = models[0] if params.scored_kinds else None
+        labeller.use_models(params.scored_kinds)
         estimate = estimate_frame(frame, params, background=model)
         model.observe_color(frame.color, frame.stamp_ns)
         # Its end-effectors mark the entities of the start, as the tracker's tracks do.

@@ -10,8 +10,10 @@ small one on the weights (the fit stays defined where a feature is constant).
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import sys
+import zlib
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
@@ -19,7 +21,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from endeff_ros.bag.reader import find_bags
+from endeff_ros.bag.reader import bag_name, find_bags
 from endeff_ros.cli_common import positive_int
 from endeff_ros.core.additive import AdditiveModel
 from tools.per_bag import run_per_bag
@@ -139,6 +141,32 @@ def collect(collect_bag: Callable[..., str], args: argparse.Namespace) -> int:
                         args.jobs)
     print('\n'.join(names), file=sys.stderr)
     return 0
+
+
+def collected_name(bag: Path) -> str:
+    """The name of ``bag``'s collected file (no suffix): the bag's name and a hash of its path,
+    so that bags of the same name from different folders (suites drawn with other seeds) do
+    not overwrite each other."""
+    return f'{bag_name(bag)}-{hashlib.sha1(str(bag.resolve()).encode()).hexdigest()[:8]}'
+
+
+def collected_files(dirs: list[Path]) -> list[Path]:
+    """The collected files (``.npz``) in ``dirs`` (folders, or files named directly), sorted;
+    exits naming the folders when there are none."""
+    files = sorted(f for d in dirs for f in (d.glob('*.npz') if d.is_dir() else [d]))
+    if not files:
+        msg = f'no collected bags (.npz) in {", ".join(map(str, dirs))}'
+        raise SystemExit(msg)
+    return files
+
+
+def holdout_fold(name: str) -> int:
+    """The half (0 or 1) of ``--holdout`` that a collected bag falls in: by its clip (the
+    name's middle part; the name without its hash for other bags), so that no clip is both
+    fitted and reported on."""
+    parts = name.split('__')
+    clip = parts[1] if len(parts) > 2 else name.rsplit('-', 1)[0]
+    return zlib.crc32(clip.encode()) % 2
 
 
 def write_model(model: Any, path: str) -> None:

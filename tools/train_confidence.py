@@ -30,10 +30,8 @@ stars too.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import sys
-import zlib
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -41,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from endeff_ros.attributes import custom_data, parse_attributes
-from endeff_ros.bag.reader import BagReader, bag_name
+from endeff_ros.bag.reader import BagReader
 from endeff_ros.core.confidence import FEATURES, MODEL_FILE, NO_FLOOR, ConfidenceModel
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
@@ -84,9 +82,7 @@ def collect_bag(bag: Path, params: EndeffParams | None = None, *, out: Path) -> 
             frame.append(np.full(len(tracks), len(n_gt)))
             paper.append([t.confidence for t in tracks])
             n_gt.append(score.n_gt)
-    # Bags of the same name from different folders (suites drawn with other seeds) must not
-    # overwrite each other.
-    name = f'{bag_name(bag)}-{hashlib.sha1(str(bag.resolve()).encode()).hexdigest()[:8]}'
+    name = additive_fit.collected_name(bag)
     np.savez_compressed(
         out / f'{name}.npz', features=np.concatenate(feats or [np.zeros((0, len(FEATURES)))]),
         right=np.concatenate(right or [np.zeros(0, bool)]),
@@ -100,10 +96,7 @@ def collect_bag(bag: Path, params: EndeffParams | None = None, *, out: Path) -> 
 def load(dirs: list[Path]) -> dict[str, Any]:
     """Every collected bag in ``dirs``: stacked ends, their bag index, and per bag its
     ground-truth count and attributes."""
-    files = sorted(f for d in dirs for f in (d.glob('*.npz') if d.is_dir() else [d]))
-    if not files:
-        msg = f'no collected bags (.npz) in {", ".join(map(str, dirs))}'
-        raise SystemExit(msg)
+    files = additive_fit.collected_files(dirs)
     parts = [np.load(f) for f in files]
     for f, p in zip(files, parts, strict=True):
         if tuple(p['names']) != FEATURES:
@@ -118,12 +111,6 @@ def load(dirs: list[Path]) -> dict[str, Any]:
             'n_gt': np.array([int(p['n_gt'].sum()) for p in parts]),
             'names': [f.stem for f in files],
             'attributes': [json.loads(str(p['attributes'])) for p in parts]}
-
-
-def clip_of(name: str) -> str:
-    """The clip a bag is drawn from (its name's middle part; the name for other bags)."""
-    parts = name.split('__')
-    return parts[1] if len(parts) > 2 else name.rsplit('-', 1)[0]
 
 
 def subset(data: dict[str, Any], bags: np.ndarray) -> dict[str, Any]:
@@ -227,7 +214,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     weight = bag_weights(data) if args.balance else None
     if args.holdout:
-        fold = np.array([zlib.crc32(clip_of(n).encode()) % 2 for n in data['names']])
+        fold = np.array([additive_fit.holdout_fold(n) for n in data['names']])
         folds = []
         for k in (0, 1):
             train, held = subset(data, fold != k), subset(data, fold == k)

@@ -19,17 +19,16 @@ frame, vote history included (:meth:`KindLabeller.label_evidence`), with the mod
 the rules: the share of matched ends whose kind is right (overall, per kind, as ``endeff
 eval``'s confusion matrix) and the share of ends of bags without people that are not 0.
 
-The committed models come from the ``dev`` bags only (docs/design.md, "Kinds"): the mocap
-suite's dev split, the rooms' dev pairs, and the generic entities drawn with seeds 1-2 (chairs,
-robot arms, stars, two people).
+The committed models come from the ``dev`` bags only (docs/design.md, "Which part an end
+is"): ``collect data/mocap_dev data/rooms data/generic_seed{1..5}/mcap``, the mocap suite's dev
+split, the rooms' dev pairs and the paper suite's generic entities drawn with seeds 1-5
+(chairs, robot arms, stars, two people).
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import sys
-import zlib
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -56,7 +55,6 @@ from endeff_ros.core.tracker import Tracker
 from endeff_ros.evaluate import gt_ids, is_person_sequence
 from endeff_ros.scoring import kinds_of_ids, score_frame
 from tools import additive_fit
-from tools.train_confidence import clip_of
 
 BINS = 8
 """Intervals per continuous feature (cut at quantiles of the training rows)."""
@@ -103,7 +101,7 @@ def collect_bag(bag: Path, params: EndeffParams | None = None, *, out: Path) -> 
             rows['age'].append([t.age for t in tracks])
             rows['frame'].append(np.full(len(tracks), k))
             rows['truth'].append(truth)
-    name = f'{bag_name(bag)}-{hashlib.sha1(str(bag.resolve()).encode()).hexdigest()[:8]}'
+    name = additive_fit.collected_name(bag)
     empty = {'person': np.zeros((0, len(PERSON_FEATURES))),
              'head': np.zeros((0, len(HEAD_FEATURES)))}
     np.savez_compressed(out / f'{name}.npz', person_bag=person, attributes=json.dumps(attributes),
@@ -116,12 +114,8 @@ def collect_bag(bag: Path, params: EndeffParams | None = None, *, out: Path) -> 
 
 def load(dirs: list[Path]) -> list[dict[str, Any]]:
     """Every collected bag in ``dirs``, with its name."""
-    files = sorted(f for d in dirs for f in (d.glob('*.npz') if d.is_dir() else [d]))
-    if not files:
-        msg = f'no collected bags (.npz) in {", ".join(map(str, dirs))}'
-        raise SystemExit(msg)
     bags = []
-    for f in files:
+    for f in additive_fit.collected_files(dirs):
         with np.load(f) as z:
             if (tuple(z['person_names']) != PERSON_FEATURES
                     or tuple(z['head_names']) != HEAD_FEATURES):
@@ -221,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
         additive_fit.print_report(report(bags, KindModels.load(args.model)), args.json)
         return 0
     if args.holdout:
-        fold = [zlib.crc32(clip_of(b['name']).encode()) % 2 for b in bags]
+        fold = [additive_fit.holdout_fold(b['name']) for b in bags]
         additive_fit.print_report({'folds': [{'held_out_fold': k, **report(
             [b for b, f in zip(bags, fold, strict=True) if f == k],
             fit([b for b, f in zip(bags, fold, strict=True) if f != k], penalty=args.penalty))}

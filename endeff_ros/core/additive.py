@@ -10,12 +10,15 @@ JSON file, evaluated with numpy (``tools/additive_fit.py`` fits them).
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import numpy.typing as npt
+
+T = TypeVar('T')
 
 
 @dataclass(frozen=True)
@@ -74,11 +77,11 @@ class AdditiveModel:
         return cls(names, edges, weights, bias)
 
 
-def read_json(path: str | Path) -> Any:
-    """The JSON content of a model file; raises ValueError naming the file when it cannot be
-    read."""
+def read_model(path: str | Path, build: Callable[[Any], T]) -> T:
+    """The model ``build`` makes of the JSON content of ``path``; raises ValueError naming
+    the file when it cannot be read or is malformed (a field missing or of the wrong type)."""
     try:
-        return json.loads(Path(path).read_text(encoding='utf-8'))
-    except (OSError, ValueError) as err:
+        return build(json.loads(Path(path).read_text(encoding='utf-8')))
+    except (OSError, ValueError, KeyError, TypeError) as err:
         msg = f'{path}: {err}'
         raise ValueError(msg) from err

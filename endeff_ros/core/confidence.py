@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .additive import AdditiveModel, read_json
+from .additive import AdditiveModel, read_model
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -136,9 +136,4 @@ class ConfidenceModel(AdditiveModel):
     def load(cls, path: str | Path = MODEL_FILE) -> ConfidenceModel:
         """The model in ``path`` (default the committed :data:`MODEL_FILE`); raises
         ValueError naming the file when it cannot be read or is malformed."""
-        data = read_json(path)
-        try:
-            return cls.from_json(data)
-        except ValueError as err:
-            msg = f'{path}: {err}'
-            raise ValueError(msg) from err
+        return read_model(path, cls.from_json)

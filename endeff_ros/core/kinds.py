@@ -69,7 +69,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from .additive import AdditiveModel, read_json
+from .additive import AdditiveModel, read_model
 from .types import Track
 
 if TYPE_CHECKING:
@@ -309,7 +309,8 @@ def _head_features(positions: npt.NDArray[np.float64], h: npt.NDArray[np.float64
     rank[order] = np.arange(len(h))
     gap = np.ones(len(h))
     if len(h) > 1:
-        others = np.array([np.max(np.delete(upper_h, j)) for j in range(len(h))])
+        # The highest other end: the highest, except for the highest itself (the second).
+        others = np.where(rank == 0, upper_h[order[1]], upper_h[order[0]])
         gap = np.where(np.isfinite(others), np.clip(h - others, -1.0, 1.0), 1.0)
     return np.column_stack([
         np.clip(rise, -1.0, 2.0), np.clip(geo - rise, -0.5, 2.0), np.minimum(lateral, 1.5),
@@ -386,12 +387,8 @@ class KindModels:
     def load(cls, path: str | Path = KIND_MODEL_FILE) -> KindModels:
         """The models in ``path`` (default the committed :data:`KIND_MODEL_FILE`); raises
         ValueError naming the file when it cannot be read or is malformed."""
-        data = read_json(path)
-        try:
-            return cls(PersonModel.from_json(data['person']), HeadModel.from_json(data['head']))
-        except (KeyError, TypeError, ValueError) as err:
-            msg = f'{path}: {err}'
-            raise ValueError(msg) from err
+        return read_model(path, lambda data: cls(PersonModel.from_json(data['person']),
+                                                 HeadModel.from_json(data['head'])))
 
     def to_json(self) -> dict[str, Any]:
         """The model file's content."""
@@ -494,24 +491,30 @@ class KindLabeller:
                            np.array([r[2] for r in rows], dtype=np.intp), shapes,
                            self._up, self._offset, models=self.models)
 
+    def use_models(self, on: bool) -> None:
+        """Decide with the committed :class:`KindModels` (``scored_kinds``; loaded when first
+        needed, a broken file raising ValueError) or, ``on`` false, with the rules alone."""
+        if not on:
+            self.models = None
+        elif self.models is None:
+            self.models = KindModels.load()
+
     def label_shapes(self, tracks: Sequence[Track],
                      shapes: dict[int, EntityShape]) -> list[Track]:
         """:meth:`label` from the entities' shapes (:func:`entity_shapes`, with this
         labeller's up and floor): the offline tools' entry."""
-        self._frame += 1
         positions = np.array([t.position for t in tracks], dtype=np.float64).reshape(-1, 3)
-        history = self._histories([t.id for t in tracks], [t.age for t in tracks])
         self.evidence = kind_evidence(
             positions, np.array([t.geodesic for t in tracks], dtype=np.float64),
             np.array([t.entity for t in tracks], dtype=np.intp), shapes, self._up, self._offset)
-        kinds = self._vote(history, self.evidence)
-        self._forget()
+        kinds = self.label_evidence([t.id for t in tracks], [t.age for t in tracks],
+                                    self.evidence)
         return [replace(t, kind=k) for t, k in zip(tracks, kinds, strict=True)]
 
     def label_evidence(self, ids: Sequence[int], ages: Sequence[int],
                        evidence: KindEvidence) -> list[int]:
         """The kinds of the ends of one frame from their track ``ids`` and ``ages`` and their
-        ``evidence`` (:func:`kind_evidence`), as :meth:`label` gives them: the offline
+        ``evidence`` (:func:`kind_evidence`): :meth:`label`'s last step, and the offline
         replay of ``tools.train_kinds``."""
         self._frame += 1
         kinds = self._vote(self._histories(ids, ages), evidence)

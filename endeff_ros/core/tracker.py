@@ -67,7 +67,7 @@ from .graph import (
     distance_to_path,
     path_to_sources,
 )
-from .kinds import KindLabeller, KindModels
+from .kinds import KindLabeller
 from .nearest import nearest_point
 from .params import EndeffParams
 from .readable import ReadableArea
@@ -205,10 +205,10 @@ class Tracker:
         self._flow: FlowEstimator | None = None
         self.background = BackgroundModel()
         self.readable = ReadableArea()
-        # Loaded now when the kinds are scored, so that a broken install fails at start.
-        self._kind_models = KindModels.load() if self.params.scored_kinds else None
-        # head, hand, foot or other per track (Track.kind)
-        self.kinds = KindLabeller(models=self._kind_models)
+        # head, hand, foot or other per track (Track.kind); its models are loaded now when
+        # the kinds are scored, so that a broken install fails at start.
+        self.kinds = KindLabeller()
+        self.kinds.use_models(self.params.scored_kinds)
         # Loaded now when the confidence is scored, so that a broken install fails at start.
         self._confidence_model = ConfidenceModel.load() if self.params.scored_confidence else None
         self.features = np.zeros((0, 0))  # the last published ends' evidence (end_features)
@@ -300,7 +300,7 @@ class Tracker:
             self._refit_floor()
         stages = dict(estimate.stage_ms)
         self._intrinsics = frame.intrinsics
-        self.kinds.models = self._kinds_decided_by()
+        self.kinds.use_models(self.params.scored_kinds)
         t0 = time.perf_counter()
         predicted = self._predict(frame, flow)
         stages['predict'] = (time.perf_counter() - t0) * 1e3
@@ -321,15 +321,6 @@ class Tracker:
                                     person=person)
         shown = [t for t in tracks if t.confidence >= self.params.min_confidence]
         return TrackerResult(frame.stamp_ns, frame.frame_id, shown, estimate, stages)
-
-    def _kinds_decided_by(self) -> KindModels | None:
-        """The person and head models with ``scored_kinds`` (loaded when first needed), else
-        None (the rules decide)."""
-        if not self.params.scored_kinds:
-            return None
-        if self._kind_models is None:
-            self._kind_models = KindModels.load()
-        return self._kind_models
 
     def _score(self, tracks: list[Track], estimate: FrameEstimate) -> list[Track]:
         """The tracks with their evidence (:func:`end_features`, kept in
