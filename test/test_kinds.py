@@ -171,6 +171,40 @@ def test_entity_shapes_measure_heights_above_the_floor_and_the_cut():
     assert shape.cut
 
 
+def test_entity_shapes_tell_a_head_on_shoulders_from_a_cabinet():
+    """``top_width``: a head's top slice is narrow against the shoulders' span, a cabinet's
+    as wide as the rest; ``thickness``: a body has depth, a cabinet's front is a plane."""
+    from endeff_ros.core.single_frame import EntityEstimate, FrameEstimate
+
+    rng = np.random.default_rng(1)
+
+    def shape(width_at, depth: float):
+        h = rng.uniform(0.0, 1.8, 3000)
+        x = rng.uniform(-0.5, 0.5, 3000) * width_at(h)
+        z = 3.0 + rng.uniform(-depth, depth, 3000)
+        pts = np.stack([x, FLOOR - h, z], axis=1)
+        ent = EntityEstimate(0, np.array(_at(0.0, 1.0)), [], None, np.arange(3000))
+        est = FrameEstimate(points=pts, band=np.zeros(3000, int), subband=np.zeros(3000, int),
+                            entity=np.zeros(3000, int), entities=[ent], unreachable=0)
+        return entity_shapes(est, UP, FLOOR)[0]
+
+    person = shape(lambda h: np.where(h > 1.55, 0.18, 0.45), 0.12)
+    cabinet = shape(lambda h: np.full_like(h, 0.6), 0.01)
+    assert person.top_width < 0.5 < 0.9 < cabinet.top_width
+    assert cabinet.thickness < 0.02 < 0.05 < person.thickness
+
+
+def test_the_person_model_weighs_a_top_as_wide_as_the_rest_against_a_person(models):
+    """The same entity with a head's narrow top and with a top as wide as the rest (a
+    cabinet, a shelf): the person model's log-odds fall."""
+    from endeff_ros.core.kinds import PERSON_FEATURES
+
+    row = np.array([[5, 1.7, 0.1, 1.7, 1, 0, 0, 2, 1, 1, 0.08, 0.3]])
+    wide = row.copy()
+    wide[0, PERSON_FEATURES.index('top_width')] = 1.0
+    assert models.person.logit(wide)[0] < models.person.logit(row)[0] - 1.0
+
+
 def test_kind_names():
     assert [kind_name(k) for k in (0, 1, 2, 3, 7)] == ['other', 'head', 'hand', 'foot', 'other']
 
@@ -317,3 +351,20 @@ def test_train_kinds_collects_fits_and_replays_a_rooms_bag(room_bag, tmp_path):
     report = json.loads((tmp_path / 'r.json').read_text(encoding='utf-8'))
     assert report['models']['matched'] == report['rules']['matched'] == matched
     assert 0.0 <= report['models']['accuracy'] <= 1.0
+
+
+def test_first_taken_finds_when_the_start_s_person_and_furniture_were_taken_for_people():
+    """``tools.train_kinds.first_taken``: the first frame an end of the person in view at the
+    start is not 0, and the same for an entity of the start that never holds a person's end."""
+    from tools.train_kinds import NEVER, first_taken
+
+    frames = np.repeat(np.arange(40), 2)  # per frame: the person's end (id 1), a shelf's (id 2)
+    bag = {'frame': frames, 'entities': np.tile([0, 1], 40), 'id': np.tile([1, 2], 40),
+           'truth': np.tile([2, -1], 40)}
+    kinds = np.zeros(80, dtype=np.intp)
+    kinds[(frames >= 10) & (bag['id'] == 1)] = 2
+    kinds[(frames == 20) & (bag['id'] == 2)] = 1
+    assert first_taken(bag, kinds) == ([10], [20])
+    assert first_taken(bag, np.zeros(80, dtype=np.intp)) == ([NEVER], [NEVER])
+    bag['truth'] = np.where(frames < 6, -1, bag['truth'])  # the person comes later
+    assert first_taken(bag, kinds)[0] == []

@@ -17,7 +17,9 @@ the committed ``endeff_ros/core/kind_model.json``); ``--holdout`` instead fits o
 half the clips and reports on the others, both ways. The report replays the kinds frame by
 frame, vote history included (:meth:`KindLabeller.label_evidence`), with the models and with
 the rules: the share of matched ends whose kind is right (overall, per kind, as ``endeff
-eval``'s confusion matrix) and the share of ends of bags without people that are not 0.
+eval``'s confusion matrix), the share of ends of bags without people that are not 0, and for
+the static background's entities of the start (``background_person_s``) how many people in view
+at the start were not yet taken for one, and other entities were, within 6, 15 and 30 frames.
 
 The committed models come from the ``dev`` bags only (docs/design.md, "Which part an end
 is"): ``collect data/mocap_dev data/rooms data/generic_seed{1..5}/mcap``, the mocap suite's dev
@@ -66,6 +68,13 @@ GENERIC_SHARE = 0.5
 """The share of the person model's weight on the bags without people (chairs, robot arms,
 stars): a few bags of three shapes against two hundred of people, which weighed by their rows
 alone made every chair and star a person."""
+START_FRAMES = 6
+"""A person in view within this many first frames (the background's learning, 0.2 s at 30
+Hz) is one of the start."""
+START_WINDOWS = (6, 15, 30)
+"""Frames from the start within which :func:`first_taken` counts an entity as taken for a
+person (``background_person_s`` 0.8 s after 0.2 s of learning: 30 at 30 Hz)."""
+NEVER = 1 << 30
 PERSON_BINARY = ('on_floor', 'cut', 'cut_top', 'rules')
 HEAD_BINARY = ('cut',)
 _FIELDS = ('entities', 'low', 'person', 'head', 'rules_person', 'rules_head')
@@ -177,26 +186,65 @@ def replay(bag: dict[str, Any], models: KindModels | None) -> np.ndarray:
     return out
 
 
+def first_taken(bag: dict[str, Any], kinds: np.ndarray) -> tuple[list[int], list[int]]:
+    """For the static background's entities of the start (``background_person_s``): the
+    frame in which an end of the person in view at the start (an entity holding a matched end
+    in the bag's first :data:`START_FRAMES` frames) was first taken for a person's (kind not
+    0), and the same for each entity of the bag's first frame none of whose tracks ever
+    matches a person's end-effector (furniture, mostly); :data:`NEVER` when never."""
+    frame, entity, truth, ids = bag['frame'], bag['entities'], bag['truth'], bag['id']
+    people: list[int] = []
+    if (truth[frame < START_FRAMES] >= 1).any():
+        matched = np.zeros(len(frame), dtype=bool)
+        for f in np.unique(frame):
+            at = frame == f
+            matched |= at & np.isin(entity, entity[at & (truth >= 1) & (entity >= 0)])
+        taken = frame[matched & (kinds != 0)]
+        people.append(int(taken.min()) if taken.size else NEVER)
+    first = frame == frame.min() if len(frame) else np.zeros(0, dtype=bool)
+    person_ids = ids[truth >= 1]
+    others = []
+    for e in np.unique(entity[first & (entity >= 0)]):
+        tracks = ids[first & (entity == e)]
+        if np.isin(tracks, person_ids).any():
+            continue
+        taken = frame[np.isin(ids, tracks) & (kinds != 0)]
+        others.append(int(taken.min()) if taken.size else NEVER)
+    return people, others
+
+
 def accuracy(bags: list[dict[str, Any]], models: KindModels | None) -> dict[str, Any]:
     """Replayed kinds against the truth: the confusion of matched ends (rows head, hand,
-    foot; columns other, head, hand, foot), the right share overall and per kind, and the share
-    of ends in bags without people that are not 0."""
+    foot; columns other, head, hand, foot), the right share overall and per kind, the share
+    of ends in bags without people that are not 0, and of the bags with people, per window of
+    :data:`START_WINDOWS` frames: the people in view at the start not taken for one within it
+    and the other entities of the start that were (:func:`first_taken`)."""
     counts = np.zeros((3, 4), dtype=np.int64)
     other, total = 0, 0
+    people: list[int] = []
+    others: list[int] = []
     for b in bags:
         kinds = replay(b, models)
         if bool(b['person_bag']):
             m = b['truth'] >= 1
             np.add.at(counts, (b['truth'][m] - 1, kinds[m]), 1)
+            p, o = first_taken(b, kinds)
+            people += p
+            others += o
         else:
             other += int(np.count_nonzero(kinds != 0))
             total += len(kinds)
     right = np.trace(counts[:, 1:])
+    first_p, first_o = np.array(people), np.array(others)
     return {'accuracy': round(float(right / max(counts.sum(), 1)), 4),
             **{KIND_NAMES[k + 1]: round(float(counts[k, k + 1] / max(counts[k].sum(), 1)), 4)
                for k in range(3)},
             'confusion': counts.tolist(), 'matched': int(counts.sum()),
-            'no_people_not_other': round(other / max(total, 1), 4)}
+            'no_people_not_other': round(other / max(total, 1), 4),
+            'start': {'people': len(people), 'other_entities': len(others),
+                      **{f'within_{w}': {'people_not_taken': int(np.sum(first_p >= w)),
+                                         'others_taken': int(np.sum(first_o < w))}
+                         for w in START_WINDOWS}}}
 
 
 def report(bags: list[dict[str, Any]], models: KindModels) -> dict[str, Any]:

@@ -321,6 +321,7 @@ class BackgroundModel:
         self._carried_uv = np.zeros((0, 2), np.int64)  # their pixels in the last frame
         self._labels: npt.NDArray[np.int32] | None = None
         self._learn_until = 0.0
+        self._release_at: float | None = None
         # (time, strided grey, strided depth) of the recent frames
         self._greys: list[tuple[float, npt.NDArray[np.uint8], npt.NDArray[np.float32]]] = []
         self._last: _Taken | None = None  # the last frame foreground() took
@@ -414,6 +415,11 @@ class BackgroundModel:
         # Entities of the start: their pixels' depth when marked (0: not marked).
         self._init_z = np.zeros(shape, np.float32)
         self._marking = initial and params.background_keep_initial
+        # ... and those whose ends were taken for a person's (:meth:`protect`'s ``person``);
+        # the others are forgotten at _release_at (None: never, ``background_keep_furniture``).
+        self._init_person = np.zeros(shape, bool)
+        self._release_at = (None if params.background_keep_furniture or not self._marking
+                            else t + params.background_learn_s + params.background_person_s)
         self._learn_until = t + params.background_learn_s
         self._settling = False
         # The grey images of earlier views say nothing of this one, but this frame's own (taken
@@ -717,6 +723,10 @@ class BackgroundModel:
         (``INITIAL_FRACTION`` of its pixels at their marked depth), and per pixel whether it
         is marked and at that depth. A marked pixel whose farther reading the background
         adopted is forgotten: what was there has left."""
+        if self._release_at is not None and self._t >= self._release_at:
+            # The entities of the start that showed no person's end by now are furniture.
+            self._init_z[~self._init_person] = 0
+            self._release_at = None
         marked = self._init_z > 0
         if not marked.any():
             return np.zeros(len(total), bool), marked
@@ -732,11 +742,15 @@ class BackgroundModel:
         (:meth:`foreground`). What never moved and holds no end-effector (walls, table tops)
         is dropped when learning ends; a person present from the start, still or not, is not.
         The tracker marks through :meth:`protect`; a caller without tracks (the single-frame
-        estimator) calls this with its end-effectors. ``person`` (aligned with
-        ``positions``; None: all): the end-effectors that may belong to a person
-        (:func:`.kinds.may_be_person`); only their components are marked, so furniture by the
-        person tests is learnt as background."""
-        if not (self._bg is not None and self._marking and self.learning):
+        estimator) calls this with its end-effectors, and goes on calling it after the
+        learning. ``person`` (aligned with ``positions``; None: all, and the marks are kept
+        for good, ``background_keep_furniture``): the end-effectors that may belong to a
+        person (:func:`.kinds.may_be_person`). A marked entity none of whose end-effectors was
+        flagged while learning or within ``background_person_s`` after it is forgotten then,
+        and learnt as background: furniture, by the kinds of a whole second (a person's ends
+        are often not yet taken for a person's in the first frames, a cabinet's sometimes
+        are)."""
+        if not (self._bg is not None and self._marking and self._confirming):
             return
         self._hits(positions, intrinsics, stride, person)
 
@@ -762,15 +776,23 @@ class BackgroundModel:
             on_track[hit[hit > 0]] = True
             held = np.take(on_track, labels)
             self._near_since[held] = self._t
-            if self._marking and self.learning and self._last is not None:
+            if self._marking and self._confirming and self._last is not None:
+                if self.learning:
+                    mark = held & (self._init_z == 0) & (self._last.depth > 0)
+                    self._init_z[mark] = self._last.depth[mark]
                 if person is not None:
                     flags = np.asarray(person, dtype=bool).reshape(-1)[ok]
                     on_track[:] = False
                     on_track[hit[(hit > 0) & flags]] = True
                     held = np.take(on_track, labels)
-                mark = held & (self._init_z == 0) & (self._last.depth > 0)
-                self._init_z[mark] = self._last.depth[mark]
+                self._init_person |= held & (self._init_z > 0)
         return ok, uv, hit
+
+    @property
+    def _confirming(self) -> bool:
+        """True while the entities of the start are marked (learning) or may still show a
+        person's end (until ``background_person_s`` after learning)."""
+        return self.learning or (self._release_at is not None and self._t < self._release_at)
 
     def _track_labels(self, labels: npt.NDArray[np.int32],
                       uv: npt.NDArray[np.int64]) -> npt.NDArray[np.int32]:
@@ -800,7 +822,8 @@ class BackgroundModel:
         image) the anchor's window falls on the wall behind, which it would keep as an entity
         for as long as the prediction lives. ``stride``: the pixel stride the last frame was
         labelled at. While learning after the start or a reset, the components of the tracks
-        flagged ``person`` (None: all) are marked as entities of the start (:meth:`mark`)."""
+        are marked as entities of the start, and those of the tracks flagged ``person`` (None:
+        all) keep their marks (:meth:`mark`)."""
         if self._labels is None or self._bg is None:
             return
         ok, uv, hit = self._hits(positions, intrinsics, stride, person)

@@ -82,13 +82,16 @@ class EndeffParams:
                                        'where it was, so a person who is already in view and '
                                        'keeps still is never hidden (false: the background drops '
                                        'it with what never moved, still people included).')
-    background_keep_furniture: bool = _p(True, 'Static background: with '
-                                         'background_keep_initial, also keep what the person '
-                                         'tests call furniture (0.5 m or taller, with legs on '
-                                         'the floor or fewer than three ends). false: what fails '
-                                         'those tests is learnt as background, and so is a still '
-                                         'person who fails them in every learning frame '
-                                         '(crawling, half hidden behind a table, walking in).')
+    background_keep_furniture: bool = _p(False, 'Static background: with '
+                                         'background_keep_initial, also keep for good what is in '
+                                         'view from the start and none of whose ends was ever '
+                                         "taken for a person's (furniture). false: such an "
+                                         'entity is learnt as background background_person_s '
+                                         'after the learning.')
+    background_person_s: float = _p(0.8, 'Static background: with background_keep_furniture '
+                                    'false, the time after the learning within which an entity '
+                                    "of the start must once show an end taken for a person's "
+                                    '(kind) to stay.', unit='s', lo=0.0, hi=3600.0)
     background_learn_s: float = _p(0.2, 'Static background: learning time after the start, a '
                                    'reset or a camera motion, during which nothing is removed.',
                                    unit='s', lo=0.0, hi=60.0)
