@@ -35,6 +35,20 @@ class Terminated(KeyboardInterrupt):
     same cleanup as for Ctrl-C's KeyboardInterrupt runs; exit status 143 instead of 130."""
 
 
+def interruption(err: BaseException | None) -> KeyboardInterrupt | None:
+    """The Ctrl-C or SIGTERM (:class:`Terminated`) that ``err`` was raised from, or None: a
+    signal taken while an extension module initialises reaches the caller as
+    ``ImportError('initialization failed')`` caused by it, which must end the command, not
+    be reported as a failed bag."""
+    seen: set[int] = set()
+    while err is not None and id(err) not in seen:
+        if isinstance(err, KeyboardInterrupt):
+            return err
+        seen.add(id(err))
+        err = err.__cause__ or err.__context__
+    return None
+
+
 def raise_terminated(signum: int, _frame: Any) -> None:
     """A SIGTERM handler: raise :class:`Terminated`."""
     raise Terminated(signum)

@@ -56,6 +56,7 @@ from endeff_ros.bag.reader import (
 from endeff_ros.cli_common import (
     EXIT_FAILED,
     EXIT_OK,
+    interruption,
     load_params_option,
     positive_int,
     usage_error,
@@ -663,6 +664,8 @@ def _eval_job(job: tuple[Path, str, EndeffParams | None, ReaderOptions, Any, Any
     except BagError as err:
         return (str(path), str(err))
     except Exception as err:  # keep the other bags going; show where it broke
+        if (stop := interruption(err)) is not None:
+            raise stop from err
         traceback.print_exc(file=sys.stderr)
         return (str(path), f'{path}: {type(err).__name__}: {err}')
 

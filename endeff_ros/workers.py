@@ -40,7 +40,7 @@ from dataclasses import dataclass
 from multiprocessing.connection import wait
 from typing import Any
 
-from endeff_ros.cli_common import Terminated
+from endeff_ros.cli_common import Terminated, interruption
 
 #: Seconds the workers get to unwind their jobs after SIGTERM before they are killed.
 GRACE_S = 3.0
@@ -269,6 +269,8 @@ def _worker_main(conn: Any, parent_pid: int, initializer: Callable[..., None] | 
             try:
                 reply = ('done', index, fn(*job), None)
             except Exception as err:  # noqa: BLE001 - the parent decides what a failure means
+                if (stop := interruption(err)) is not None:
+                    raise stop from err
                 reply = ('done', index, None, _portable(err))
             done, _UNSENT = _UNSENT, 0
             try:

@@ -212,3 +212,24 @@ def test_a_worker_sigterm_inside_the_import_machinery_is_taken_after_it(monkeypa
     with pytest.raises(Terminated):
         workers._on_sigterm(signal.SIGTERM, elsewhere)
     assert len(sent) == 1
+
+
+def test_a_sigterm_wrapped_by_an_extension_module_s_import_still_ends_the_job(
+        monkeypatch, tmp_path: Path) -> None:
+    """A SIGTERM taken while an extension module initialises reaches the job as
+    ``ImportError('initialization failed')`` caused by Terminated: ``endeff eval``'s job
+    raises the Terminated (the command ends, status 143) instead of reporting a failed bag
+    with a traceback."""
+    from endeff_ros import evaluate
+    from endeff_ros.cli_common import Terminated, interruption
+
+    def importing(*_args, **_kwargs):
+        try:
+            raise Terminated(signal.SIGTERM)
+        except Terminated as err:
+            raise ImportError('initialization failed') from err
+
+    monkeypatch.setattr(evaluate, 'evaluate_bag', importing)
+    with pytest.raises(Terminated):
+        evaluate._eval_job((tmp_path / 'a', 'a', None, None, None, None))
+    assert interruption(ValueError('a bag')) is None
