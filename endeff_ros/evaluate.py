@@ -129,10 +129,12 @@ def _background_estimate() -> EstimateFn:
         labeller.use_models(params.scored_kinds)
         estimate = estimate_frame(frame, params, background=model)
         model.observe_color(frame.color, frame.stamp_ns)
-        # Its end-effectors mark the entities of the start, as the tracker's tracks do.
-        person = (None if params.background_keep_furniture
-                  else person_candidates(estimate, frame.intrinsics, labeller))
-        model.mark(estimate.positions(), frame.intrinsics, params.pixel_stride, person)
+        # Its end-effectors mark the entities of the start, as the tracker's tracks do; their
+        # kinds are found only while they decide what stays (a frame's shapes and kinds).
+        if model.marking:
+            person = (person_candidates(estimate, frame.intrinsics, labeller)
+                      if model.wants_people else None)
+            model.mark(estimate.positions(), frame.intrinsics, params.pixel_stride, person)
         return estimate
 
     return estimate

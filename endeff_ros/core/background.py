@@ -750,9 +750,8 @@ class BackgroundModel:
         and learnt as background: furniture, by the kinds of a whole second (a person's ends
         are often not yet taken for a person's in the first frames, a cabinet's sometimes
         are)."""
-        if not (self._bg is not None and self._marking and self._confirming):
-            return
-        self._hits(positions, intrinsics, stride, person)
+        if self.marking:
+            self._hits(positions, intrinsics, stride, person)
 
     def _hits(self, positions: npt.NDArray[np.float64], intrinsics: Intrinsics, stride: int,
               person: npt.ArrayLike | None = None
@@ -793,6 +792,19 @@ class BackgroundModel:
         """True while the entities of the start are marked (learning) or may still show a
         person's end (until ``background_person_s`` after learning)."""
         return self.learning or (self._release_at is not None and self._t < self._release_at)
+
+    @property
+    def marking(self) -> bool:
+        """True while :meth:`mark` (and :meth:`protect`) mark or confirm entities of the
+        start: a caller without tracks need not find its end-effectors' kinds otherwise."""
+        return self._bg is not None and self._marking and self._confirming
+
+    @property
+    def wants_people(self) -> bool:
+        """True while the ``person`` flags of :meth:`mark` and :meth:`protect` decide which
+        entities of the start stay (``background_keep_furniture`` false, within
+        ``background_person_s``); otherwise they are not read, and callers pass None."""
+        return self.marking and self._release_at is not None
 
     def _track_labels(self, labels: npt.NDArray[np.int32],
                       uv: npt.NDArray[np.int64]) -> npt.NDArray[np.int32]:

@@ -313,8 +313,8 @@ class Tracker:
         tracks = self._score(self.kinds.label([self._publish(t) for t in self._tracks],
                                               estimate, frame.intrinsics), estimate)
         if self.params.background:  # tracked entities are never absorbed by the background
-            person = (None if self.params.background_keep_furniture
-                      else self.kinds.may_be_people(tracks))
+            person = (self.kinds.may_be_people(tracks) if self.background.wants_people
+                      else None)
             self.background.protect(self._anchors(), [t.id for t in self._tracks],
                                     frame.intrinsics, self.params.pixel_stride,
                                     detected=[t.detected for t in self._tracks],
