@@ -1,0 +1,209 @@
+"""Filters of the published positions compared on recorded tracks, without running the pipeline.
+
+The tracker follows the raw positions (:mod:`endeff_ros.core.smoothing`): the filter changes
+what is published, never which tracks there are. So one recorded run per bag (every track's
+raw position, id and published flag per frame, with the ground truth) is enough to score any
+filter: each replayed along the tracks, its published positions matched to the truth as
+``endeff eval`` matches them (Hungarian within 0.15 m) and scored with
+:class:`~endeff_ros.tracking_metrics.TrackingScorer` (jitter, acceleration error) and the
+paper's recall and mean error.
+
+    python -m tools.smoothing_replay collect BAG_OR_DIR [...] --out FILE.pkl [--jobs 2]
+    python -m tools.smoothing_replay score FILE.pkl [--json OUT]
+
+``score`` replays the default One Euro filter first and checks that it gives the positions
+the tracker published (the replay is faithful), then the variants of :func:`variants`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import pickle
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from endeff_ros.cli_common import print_json
+from endeff_ros.core.params import EndeffParams
+from endeff_ros.core.smoothing import OneEuroParams, one_euro
+from endeff_ros.scoring import score_frame
+from endeff_ros.tracking_metrics import TrackingScorer
+from tools.per_bag import run_per_bag
+from tools.track_history import _RecordingTracker, tracked_frames
+
+#: One recorded frame: index, stamp (ns), every track's id, raw position and published flag,
+#: the positions published, the truth with its keys and kinds (None: no truth), and which
+#: tracks are new in the frame (a revived id is a new track: its filter starts again).
+Frame = tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, Any, Any,
+              np.ndarray]
+#: A filter step for the tracks of one frame: (raw, state or None per track, dt) -> positions,
+#: new states.
+Step = Callable[[np.ndarray, list[Any], np.ndarray], tuple[np.ndarray, list[Any]]]
+
+
+def record_bag(bag: Path, params: EndeffParams | None = None) -> tuple[str, list[Frame]]:
+    """Every track of every frame of one bag, as the tracker ran it."""
+    tracker = _RecordingTracker(params or EndeffParams())
+    frames: list[Frame] = []
+    stamp, last = 0, 0
+    for f in tracked_frames(bag, tracker):
+        states = tracker._tracks  # noqa: SLF001 - the recording needs the unpublished tracks
+        # the frame's stamp, as the tracks hold it (a frame without tracks: 30 Hz on)
+        stamp = (max(t.stamp_ns for t in states) if states
+                 else stamp + (f.index - last) * 33_333_333)
+        last = f.index
+        published = {t.id for t in f.tracks}
+        ids = np.array([t.id for t in states], dtype=np.int64)
+        raw = np.array([t.raw for t in states], dtype=np.float64).reshape(-1, 3)
+        flags = np.array([t.id in published for t in states], dtype=bool)
+        shown = np.array([t.position for t in f.tracks], dtype=np.float64).reshape(-1, 3)
+        fresh = np.array([t.age == 1 for t in states], dtype=bool)
+        frames.append((f.index, stamp, ids, raw, flags, shown, f.gt, f.keys, f.kinds, fresh))
+    return bag.name, frames
+
+
+def one_euro_step(p: OneEuroParams) -> Step:
+    """The tracker's filter as a replay step (state: raw, filtered, velocity)."""
+    def step(raw: np.ndarray, states: list[Any], dt: np.ndarray) -> tuple[np.ndarray, list[Any]]:
+        out = raw.copy()
+        old = np.array([s is not None for s in states], dtype=bool)
+        if old.any():
+            prev = [s for s in states if s is not None]
+            out[old], v = one_euro(raw[old], [s[0] for s in prev], [s[1] for s in prev],
+                                   [s[2] for s in prev], dt[old], p)
+        vel = np.zeros_like(raw)
+        if old.any():
+            vel[old] = v
+        return out, [(r, o, w) for r, o, w in zip(raw, out, vel, strict=True)]
+    return step
+
+
+def kalman_step(q: float, r: float, reset: float = 0.2, max_lag: float = 0.05) -> Step:
+    """Constant-velocity Kalman filter per axis: white-acceleration noise ``q`` (m²/s³),
+    measurement noise ``r`` (m, standard deviation). State: raw, x, v, covariance (2x2)."""
+    def step(raw: np.ndarray, states: list[Any], dt: np.ndarray) -> tuple[np.ndarray, list[Any]]:
+        out, new = raw.copy(), []
+        for k, (z, s, h) in enumerate(zip(raw, states, dt, strict=True)):
+            if s is None or np.linalg.norm(z - s[0]) > reset:
+                cov = np.array([[r * r, 0.0], [0.0, 1.0]])
+                new.append((z, z.copy(), np.zeros(3), cov))
+                continue
+            _, x, v, cov = s
+            f = np.array([[1.0, h], [0.0, 1.0]])
+            qm = q * np.array([[h ** 3 / 3, h ** 2 / 2], [h ** 2 / 2, h]])
+            cov = f @ cov @ f.T + qm
+            xp, vp = x + v * h, v
+            gain = cov[:, 0] / (cov[0, 0] + r * r)
+            innov = z - xp
+            x, v = xp + gain[0] * innov, vp + gain[1] * innov
+            cov = cov - np.outer(gain, cov[0])
+            lag = x - z
+            n = np.linalg.norm(lag)
+            if max_lag > 0 and n > max_lag:
+                x = z + lag * (max_lag / n)
+            out[k] = x
+            new.append((z, x, v, cov))
+        return out, new
+    return step
+
+
+def replay(frames: list[Frame], step: Step) -> list[np.ndarray]:
+    """The positions ``step`` publishes in each frame (a track absent from the frame before
+    starts again)."""
+    states: dict[int, Any] = {}
+    last_stamp: dict[int, int] = {}
+    shown = []
+    for _, stamp, ids, raw, flags, *_, fresh in frames:
+        st = [None if f else states.get(int(i)) for i, f in zip(ids, fresh, strict=True)]
+        dt = np.array([(stamp - last_stamp.get(int(i), stamp)) * 1e-9 for i in ids])
+        out, new = step(raw, st, dt)
+        states = {int(i): s for i, s in zip(ids, new, strict=True)}
+        last_stamp = {int(i): stamp for i in ids}
+        shown.append(out[flags])
+    return shown
+
+
+def score(frames: list[Frame], shown: list[np.ndarray]) -> dict[str, float]:
+    """Recall, mean error, FPR and the tracking figures of one bag's replayed positions."""
+    scorer = TrackingScorer()
+    n_gt = n_est = tp = 0
+    err = 0.0
+    for (index, stamp, ids, _, flags, _, gt, keys, kinds, _), pos in zip(frames, shown,
+                                                                      strict=True):
+        if gt is None:
+            continue
+        fs = score_frame(pos, gt)
+        n_gt, n_est, tp, err = n_gt + fs.n_gt, n_est + fs.n_est, tp + fs.tp, err + fs.errors.sum()
+        scorer.add(stamp, gt, keys, kinds, pos, ids[flags], fs.matches, frame=index)
+    t = scorer.result()['all']
+    return {'recall': tp / max(n_gt, 1), 'fp_rate': (n_est - tp) / max(n_est, 1),
+            'error_m': err / max(tp, 1), 'jitter_m': t['jitter_m'],
+            'accel_error_m': t['accel_error_m']}
+
+
+def variants() -> dict[str, Step]:
+    """The filters compared: none, the tracker's One Euro filter and its parameters moved one
+    at a time, and constant-velocity Kalman filters."""
+    p = EndeffParams()
+    base = OneEuroParams(p.smoothing_min_cutoff, p.smoothing_beta, p.smoothing_d_cutoff,
+                         p.smoothing_max_lag, p.smoothing_reset_distance)
+    out: dict[str, Step] = {'one_euro_default': one_euro_step(base),
+                            'raw': lambda r, s, d: (r.copy(), [None] * len(r))}
+    for name, change in (('beta3', {'beta': 3.0}), ('beta20', {'beta': 20.0}),
+                         ('min_cutoff1', {'min_cutoff': 1.0}), ('d_cutoff2', {'d_cutoff': 2.0}),
+                         ('max_lag3cm', {'max_lag': 0.03})):
+        out[f'one_euro_{name}'] = one_euro_step(base._replace(**change))
+    for q, r in ((5.0, 0.02), (20.0, 0.01), (80.0, 0.01)):
+        out[f'kalman_q{q:g}_r{r:g}'] = kalman_step(q, r, base.reset_distance, base.max_lag)
+    return out
+
+
+def _mean(rows: list[dict[str, float]]) -> dict[str, float]:
+    return {k: float(np.nanmean([r[k] for r in rows])) for k in rows[0]}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    sub = parser.add_subparsers(dest='command', required=True)
+    c = sub.add_parser('collect')
+    c.add_argument('bags', nargs='+')
+    c.add_argument('--out', required=True)
+    c.add_argument('--jobs', type=int, default=1)
+    s = sub.add_parser('score')
+    s.add_argument('file')
+    s.add_argument('--json')
+    args = parser.parse_args(argv)
+    if args.command == 'collect':
+        from endeff_ros.bag.reader import find_bags
+
+        bags = sorted(find_bags(args.bags))
+        runs = run_per_bag(record_bag, bags, None, args.jobs)
+        with open(args.out, 'wb') as fh:
+            pickle.dump(runs, fh)
+        print(f'{len(runs)} bags recorded in {args.out}')
+        return 0
+    with open(args.file, 'rb') as fh:
+        runs = pickle.load(fh)  # noqa: S301 - a file this tool wrote
+    steps = variants()
+    worst = max(float(np.max(np.abs(s - f[5]), initial=0.0))
+                for _, frames in runs
+                for s, f in zip(replay(frames, steps['one_euro_default']), frames,
+                                strict=True))
+    print(f'replay of the default filter: largest difference to the published {worst:.2e} m')
+    report = {}
+    for name, step in steps.items():
+        report[name] = _mean([score(frames, replay(frames, step)) for _, frames in runs])
+        r = report[name]
+        print(f'{name:22s} recall {r["recall"]:.4f} fpr {r["fp_rate"]:.4f} '
+              f'err {r["error_m"] * 100:.2f} cm jitter {r["jitter_m"] * 1e3:.1f} mm '
+              f'acc {r["accel_error_m"] * 1e3:.1f} mm', flush=True)
+    if args.json:
+        print_json(report, args.json)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
