@@ -77,9 +77,16 @@ def fit(cls: type[M], features: np.ndarray, target: np.ndarray, *, bins: int,
         reg[o:o + len(e) + 1, o:o + len(e) + 1] += penalty * d.T @ d
     prior = min(max(np.average(y, weights=sw), 1e-3), 1 - 1e-3)
     b = float(np.log(prior / (1 - prior)))
+
+    def loss(w: np.ndarray, b: float) -> float:
+        """The penalised negative log-likelihood that Newton's steps descend."""
+        z = b + x @ w
+        return float(np.sum(sw * (np.logaddexp(0.0, z) - y * z)) + 0.5 * w @ reg @ w)
+
+    current = loss(w, b)
     for _ in range(iterations):
         z = b + x @ w
-        p = 1.0 / (1.0 + np.exp(-z))
+        p = 0.5 * (1.0 + np.tanh(0.5 * z))  # the logistic, without exp's overflow
         r = sw * p * (1 - p)
         g_w = x.T @ (sw * (p - y)) + reg @ w
         g_b = float(np.sum(sw * (p - y)))
@@ -87,9 +94,17 @@ def fit(cls: type[M], features: np.ndarray, target: np.ndarray, *, bins: int,
         h_ww = x.T @ xr + reg
         h_wb = xr.sum(axis=0)
         h = np.block([[h_ww, h_wb[:, None]], [h_wb[None, :], np.array([[r.sum()]])]])
-        step = np.linalg.solve(h, np.r_[g_w, g_b])
+        step = np.linalg.lstsq(h, np.r_[g_w, g_b], rcond=None)[0]
+        # A full Newton step can overshoot far from the optimum (rows then saturate and the
+        # Hessian turns singular): halve it until the loss falls.
+        for _ in range(30):
+            trial = loss(w - step[:-1], b - float(step[-1]))
+            if trial <= current:
+                break
+            step = step / 2
         w -= step[:-1]
         b -= float(step[-1])
+        current = trial
         if np.max(np.abs(step)) < 1e-6:
             break
     # Each feature's intervals cover every row, so a constant moves freely between a

@@ -591,25 +591,37 @@ class BackgroundModel:
         fresh = valid & ~known
         pending = farther | fresh
         agree = pending & (self._far_n > 0) & (np.abs(d - self._far_ref) <= margin)
-        self._far_n = np.where(pending, np.where(agree, self._far_n + 1, 1),
-                               0).astype(np.int16, copy=False)
-        self._far_ref = np.where(pending & ~agree, d, self._far_ref)
-        adopt = self._far_n >= FAR_FRAMES
-        # Readings within the margin: the running mean follows them.
-        steady = known & ~nearer & ~farther
-        bg = np.where(steady, bg + np.float32(FOLLOW) * (d - bg), bg)
-        bg = np.where(adopt, d, bg).astype(np.float32, copy=False)
-        self._far_t = np.where(adopt & known, t, self._far_t)
-        self._far_n[adopt] = 0
+        # The per-pixel state is updated in place, sparse masks by assignment: each np.where
+        # over the image costs a pass and an allocation (~1 ms a frame for these lines).
+        far_n = self._far_n  # pending: one more if it agrees, else 1; not pending: 0
+        far_n += agree
+        restart = pending & ~agree
+        far_n[restart] = 1
+        far_n *= pending
+        self._far_ref[restart] = d[restart]
+        adopt = far_n >= FAR_FRAMES
+        # Readings within the margin: the running mean follows them (a new array: callers of
+        # ``background`` may hold the last one).
+        follow = d - bg
+        follow *= np.float32(FOLLOW)
+        follow *= known & ~nearer & ~farther
+        bg = bg + follow
+        bg[adopt] = d[adopt]
+        self._far_t[adopt & known] = t
+        far_n[adopt] = 0
         # No reading for MISS_FRAMES frames: what was there left, nothing is seen behind it
         # (not after a few frames: dark or glossy surfaces drop out now and then).
-        self._miss_n = np.where(valid | (bg <= 0), 0,
-                                self._miss_n + 1).astype(np.int16, copy=False)
-        bg[self._miss_n >= MISS_FRAMES] = 0
+        miss_n = self._miss_n
+        miss_n += 1
+        miss_n *= ~valid & (bg > 0)
+        bg[miss_n >= MISS_FRAMES] = 0
         # Nearer readings: absorbed after background_absorb_s at a steady depth.
         same = nearer & (np.abs(d - self._near_ref) <= margin)
-        self._near_since = np.where(same, self._near_since, t)
-        self._near_ref = np.where(nearer & ~same, d, self._near_ref)
+        kept_since = self._near_since[same]
+        self._near_since.fill(t)
+        self._near_since[same] = kept_since
+        moved_nearer = nearer & ~same
+        self._near_ref[moved_nearer] = d[moved_nearer]
         absorb = nearer & (t - self._near_since >= params.background_absorb_s)
         bg[absorb] = d[absorb]
         self._bg = bg
@@ -672,7 +684,8 @@ class BackgroundModel:
         held = np.bincount(labels[recent], minlength=n) >= HOLD_FRACTION * total
         # The hold is not renewed on pixels certifying as static (furniture that a noisy edge
         # joined to a person for a frame).
-        certifying = (self._static_z > 0) & (np.abs(d - self._static_z) <= margin)
+        margin_ok = np.abs(d - self._static_z) <= margin
+        certifying = (self._static_z > 0) & margin_ok
         renew &= ~certifying
         self._kept_t[renew] = t
         self._kept_z[renew] = d[renew]
@@ -685,8 +698,7 @@ class BackgroundModel:
         fg = np.take(keep, labels) & candidate
         # Certified static: pixels that were dropped for STATIC_S at the same depth stay
         # dropped when a moving component joins them (furniture a person stands next to).
-        margin_ok = np.abs(d - self._static_z) <= margin
-        start = candidate & ~fg & ~((self._static_z > 0) & margin_ok)
+        start = candidate & ~fg & ~certifying
         self._static_z[start] = d[start]
         self._static_since[start] = t
         # That surface is gone: something changed in front of it, or it left (a single
