@@ -9,6 +9,7 @@ filter: each replayed along the tracks, its published positions matched to the t
 paper's recall and mean error.
 
     python -m tools.smoothing_replay collect BAG_OR_DIR [...] --out FILE.pkl [--jobs 2]
+                                     [--params YAML]
     python -m tools.smoothing_replay score FILE.pkl [--json OUT]
 
 ``score`` replays the default One Euro filter first and checks that it gives the positions
@@ -26,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from endeff_ros.cli_common import print_json
+from endeff_ros.cli_common import load_params_option, print_json
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.smoothing import OneEuroParams, one_euro
 from endeff_ros.scoring import score_frame
@@ -172,6 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument('bags', nargs='+')
     c.add_argument('--out', required=True)
     c.add_argument('--jobs', type=int, default=1)
+    c.add_argument('--params', help='parameter YAML (default: the defaults)')
     s = sub.add_parser('score')
     s.add_argument('file')
     s.add_argument('--json')
@@ -180,7 +182,8 @@ def main(argv: list[str] | None = None) -> int:
         from endeff_ros.bag.reader import find_bags
 
         bags = sorted(find_bags(args.bags))
-        runs = run_per_bag(record_bag, bags, None, args.jobs)
+        params = load_params_option(args.params, 'smoothing_replay')
+        runs = run_per_bag(record_bag, bags, params, args.jobs)
         with open(args.out, 'wb') as fh:
             pickle.dump(runs, fh)
         print(f'{len(runs)} bags recorded in {args.out}')
