@@ -152,14 +152,15 @@ def test_workers_end_when_the_command_is_killed(tmp_path: Path, bags: Path) -> N
     """SIGKILL (the OOM killer, a supervisor's last resort) gives the command no chance to stop
     its workers: they notice on their own, stop, and remove their partial outputs."""
     out = tmp_path / 'out'
-    status, _, _ = _interrupt(tmp_path, ['process', str(bags), '-o', str(out), '--jobs', '2'],
-                              signal.SIGKILL, group=False, delay=0.3,
-                              ready='out/.long_*.partial-*')
+    status, err, _ = _interrupt(tmp_path, ['process', str(bags), '-o', str(out), '--jobs', '2'],
+                                signal.SIGKILL, group=False, delay=0.3,
+                                ready='out/.long_*.partial-*')
     assert status == -signal.SIGKILL
     deadline = time.monotonic() + ORPHAN_S
     while list(out.rglob('.*partial*')) and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert not list(out.rglob('.*partial*')), 'a partial output was left'
+    left = sorted(str(p.relative_to(out)) for p in out.rglob('*'))
+    assert not list(out.rglob('.*partial*')), f'a partial output was left: {left}; {err}'
 
 
 @pytest.mark.parametrize(('sig', 'group'), [(signal.SIGTERM, False), (signal.SIGINT, True)])

@@ -254,10 +254,10 @@ def process_bag(in_path: str | Path, out_path: str | Path, *,
     # name), then moved into place.
     tmp_dir = partial_dir(out_path)
     tmp = tmp_dir / out_path.name
-    remove(tmp_dir)
-    tmp_dir.mkdir(parents=True)
     ts = typestore() if markers or copy_input else cloud_typestore()
-    try:
+    remove(tmp_dir)
+    try:  # from the directory's creation on: an interrupt there must remove it too
+        tmp_dir.mkdir(parents=True)
         with BagReader(in_path, options) as bag:
             assert bag.selection is not None
             result.topics = bag.selection.describe()
