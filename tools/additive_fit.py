@@ -78,14 +78,14 @@ def fit(cls: type[M], features: np.ndarray, target: np.ndarray, *, bins: int,
     prior = min(max(np.average(y, weights=sw), 1e-3), 1 - 1e-3)
     b = float(np.log(prior / (1 - prior)))
 
-    def loss(w: np.ndarray, b: float) -> float:
-        """The penalised negative log-likelihood that Newton's steps descend."""
+    def loss(w: np.ndarray, b: float) -> tuple[float, np.ndarray]:
+        """The penalised negative log-likelihood that Newton's steps descend, and the
+        linear predictor it was computed from."""
         z = b + x @ w
-        return float(np.sum(sw * (np.logaddexp(0.0, z) - y * z)) + 0.5 * w @ reg @ w)
+        return float(np.sum(sw * (np.logaddexp(0.0, z) - y * z)) + 0.5 * w @ reg @ w), z
 
-    current = loss(w, b)
+    current, z = loss(w, b)
     for _ in range(iterations):
-        z = b + x @ w
         p = 0.5 * (1.0 + np.tanh(0.5 * z))  # the logistic, without exp's overflow
         r = sw * p * (1 - p)
         g_w = x.T @ (sw * (p - y)) + reg @ w
@@ -98,7 +98,7 @@ def fit(cls: type[M], features: np.ndarray, target: np.ndarray, *, bins: int,
         # A full Newton step can overshoot far from the optimum (rows then saturate and the
         # Hessian turns singular): halve it until the loss falls.
         for _ in range(30):
-            trial = loss(w - step[:-1], b - float(step[-1]))
+            trial, z = loss(w - step[:-1], b - float(step[-1]))
             if trial <= current:
                 break
             step = step / 2

@@ -69,15 +69,12 @@ def record_bag(bag: Path, params: EndeffParams | None = None) -> tuple[str, list
 def one_euro_step(p: OneEuroParams) -> Step:
     """The tracker's filter as a replay step (state: raw, filtered, velocity)."""
     def step(raw: np.ndarray, states: list[Any], dt: np.ndarray) -> tuple[np.ndarray, list[Any]]:
-        out = raw.copy()
+        out, vel = raw.copy(), np.zeros_like(raw)
         old = np.array([s is not None for s in states], dtype=bool)
         if old.any():
             prev = [s for s in states if s is not None]
-            out[old], v = one_euro(raw[old], [s[0] for s in prev], [s[1] for s in prev],
-                                   [s[2] for s in prev], dt[old], p)
-        vel = np.zeros_like(raw)
-        if old.any():
-            vel[old] = v
+            out[old], vel[old] = one_euro(raw[old], [s[0] for s in prev], [s[1] for s in prev],
+                                          [s[2] for s in prev], dt[old], p)
         return out, [(r, o, w) for r, o, w in zip(raw, out, vel, strict=True)]
     return step
 
@@ -114,15 +111,14 @@ def kalman_step(q: float, r: float, reset: float = 0.2, max_lag: float = 0.05) -
 def replay(frames: list[Frame], step: Step) -> list[np.ndarray]:
     """The positions ``step`` publishes in each frame (a track absent from the frame before
     starts again)."""
-    states: dict[int, Any] = {}
-    last_stamp: dict[int, int] = {}
+    states: dict[int, tuple[int, Any]] = {}  # track id -> (stamp, filter state)
     shown = []
     for _, stamp, ids, raw, flags, *_, fresh in frames:
-        st = [None if f else states.get(int(i)) for i, f in zip(ids, fresh, strict=True)]
-        dt = np.array([(stamp - last_stamp.get(int(i), stamp)) * 1e-9 for i in ids])
-        out, new = step(raw, st, dt)
-        states = {int(i): s for i, s in zip(ids, new, strict=True)}
-        last_stamp = {int(i): stamp for i in ids}
+        last = [(stamp, None) if f else states.get(int(i), (stamp, None))
+                for i, f in zip(ids, fresh, strict=True)]
+        dt = np.array([(stamp - s) * 1e-9 for s, _ in last])
+        out, new = step(raw, [st for _, st in last], dt)
+        states = {int(i): (stamp, s) for i, s in zip(ids, new, strict=True)}
         shown.append(out[flags])
     return shown
 
