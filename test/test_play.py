@@ -106,6 +106,32 @@ def _bag_messages(path: Path) -> dict[str, list[int]]:
     finally:
         reader.close()
 
+def test_play_waits_until_the_matches_hold_still():
+    """The first message waits for the subscriber's last topic to match, and a quiet time
+    after it; never longer than the limit."""
+    from endeff_ros.bag.play import settle
+
+    class Executor:
+        def spin_once(self, timeout_sec: float) -> None:
+            time.sleep(timeout_sec)
+
+    class Player:
+        def __init__(self, changes: list[float]) -> None:
+            self.start, self.changes = time.monotonic(), changes
+
+        def matched(self) -> dict[str, int]:
+            t = time.monotonic() - self.start
+            return {'/a': 1, '/b': sum(c <= t for c in self.changes)}
+
+    player = Player([0.0, 0.15, 0.3])  # three topics match, 0.15 s apart
+    settle(Executor(), player, 0.2, 5.0)
+    waited = time.monotonic() - player.start
+    assert 0.5 <= waited < 1.5
+    player = Player([0.1 * k for k in range(100)])  # never quiet: the limit ends it
+    settle(Executor(), player, 0.2, 0.4)
+    assert 0.4 <= time.monotonic() - player.start < 1.0
+
+
 
 @pytest.mark.integration
 def test_play_publishes_every_topic_and_the_recording_clock(compressed_bag):

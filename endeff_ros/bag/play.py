@@ -11,8 +11,9 @@ with ``use_sim_time``. Topics whose type cannot be imported are skipped, with on
 
 Publishers are reliable, keep last 10: they match both reliable and best-effort subscribers
 (the node's inputs are best effort by default). Before the first message it waits up to
-``--wait`` s for a subscriber of any of the bag's topics, for a node started at the same time
-would otherwise miss the first frames while DDS discovery runs.
+``--wait`` s for a subscriber of any of the bag's topics, then until its matches have held
+still for a second (:func:`settle`), for a node started at the same time would otherwise miss
+the first frames while DDS discovery runs.
 
 No rosbag2: bags are read by :mod:`rosbags` (mcap or sqlite3, a directory or a file).
 """
@@ -37,6 +38,10 @@ CLOCK_TOPIC = '/clock'
 #: ``/clock`` is published at least this often (Hz) while the player waits between messages,
 #: as ``ros2 bag play --clock`` does by default (40 Hz): timers of a node on sim time run.
 CLOCK_HZ = 40.0
+#: After the first subscriber, the matches must hold still this long (s) before the first
+#: message, and the wait ends after at most SETTLE_LIMIT_S (:func:`settle`).
+SETTLE_S = 1.0
+SETTLE_LIMIT_S = 5.0
 
 
 def spin_for(executor: Any, seconds: float) -> None:
@@ -57,6 +62,26 @@ def spin_until(executor: Any, condition: Callable[[], bool], timeout: float) -> 
             return False
         executor.spin_once(timeout_sec=0.01)
     return True
+
+
+def settle(executor: Any, player: BagPlayer, quiet: float, limit: float) -> None:
+    """Spin until the player's matches have not changed for ``quiet`` s (at most ``limit``
+    s). A publisher that sees a subscription does not mean the subscriber sees the publisher
+    yet: DDS discovers each side on its own, and a reliable, volatile reader drops what comes
+    before it matched. A subscriber's topics match one by one, so the wait starts again at
+    each new match; 0.5 s after the first one lost a frame on every topic now and then on a
+    loaded machine."""
+    end = time.monotonic() + limit
+    seen = player.matched()
+    still_since = time.monotonic()
+    while True:
+        now = time.monotonic()
+        if now - still_since >= quiet or now >= end:
+            return
+        executor.spin_once(timeout_sec=0.01)
+        current = player.matched()
+        if current != seen:
+            seen, still_since = current, time.monotonic()
 
 
 def message_class(msgtype: str) -> Any:
@@ -116,6 +141,10 @@ class BagPlayer:
     def subscribed(self) -> bool:
         """Some topic of the bag has a subscriber."""
         return any(p.get_subscription_count() > 0 for p in self.pubs.values())
+
+    def matched(self) -> dict[str, int]:
+        """Subscribers per topic, as this player's publishers see them."""
+        return {t: p.get_subscription_count() for t, p in self.pubs.items()}
 
     def publish_clock(self, stamp_ns: int) -> None:
         """``/clock`` at ``stamp_ns`` (a recording time), if the clock is on."""
@@ -249,7 +278,7 @@ def _play(path: Path, args: argparse.Namespace) -> int:
             print(f'endeff play: no subscriber of any of its topics after {args.wait:g} s; '
                   'playing anyway', file=sys.stderr)
         elif args.wait > 0:
-            spin_for(executor, 0.5)  # the subscriber's other topics match too
+            settle(executor, player, SETTLE_S, SETTLE_LIMIT_S)
         stats = player.play(executor, rate=args.rate, max_seconds=args.max_seconds)
         print(f'{path}: {stats.messages} messages on {len(stats.per_topic)} topics, '
               f'{stats.bag_seconds:.1f} s of recording in {stats.seconds:.1f} s'
