@@ -27,7 +27,8 @@ def test_replayed_default_filter_is_what_the_tracker_published(room_bag):
 def _track(positions: np.ndarray, dt: float = 1 / 30) -> list[smoothing_replay.Frame]:
     """One track (id 0) at ``positions``, its truth the same points without noise."""
     return [(k, int(k * dt * 1e9), np.array([0]), p[None], np.array([True]), p[None],
-             None, None, None, np.array([k == 0])) for k, p in enumerate(positions)]
+             None, None, None, np.array([k == 0]), np.full((1, 3), np.nan))
+            for k, p in enumerate(positions)]
 
 
 def test_kalman_follows_constant_velocity_and_smooths_a_still_point():

@@ -36,18 +36,31 @@ from tools.per_bag import run_per_bag
 from tools.track_history import _RecordingTracker, tracked_frames
 
 #: One recorded frame: index, stamp (ns), every track's id, raw position and published flag,
-#: the positions published, the truth with its keys and kinds (None: no truth), and which
-#: tracks are new in the frame (a revived id is a new track: its filter starts again).
+#: the positions published, the truth with its keys and kinds (None: no truth), which
+#: tracks are new in the frame (a revived id is a new track: its filter starts again) and
+#: each track's motion since the frame before by the scene flow (its anchor's prediction,
+#: :meth:`Tracker._predict`; NaN for a new track or without a colour pair).
 Frame = tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, Any, Any,
-              np.ndarray]
-#: A filter step for the tracks of one frame: (raw, state or None per track, dt) -> positions,
-#: new states.
-Step = Callable[[np.ndarray, list[Any], np.ndarray], tuple[np.ndarray, list[Any]]]
+              np.ndarray, np.ndarray]
+#: A filter step for the tracks of one frame: (raw, state or None per track, dt, scene-flow
+#: motion) -> positions, new states.
+Step = Callable[[np.ndarray, list[Any], np.ndarray, np.ndarray], tuple[np.ndarray, list[Any]]]
+
+
+class _FlowRecordingTracker(_RecordingTracker):
+    """Also keeps, per track id, the motion its anchor's prediction gave in the last update."""
+
+    def _update(self, estimate, predicted):  # type: ignore[no-untyped-def]
+        moved = predicted - self._anchors()
+        flowed = self._prev is not None and self._prev.color is not None
+        self.motion = {t.id: (m if flowed else np.full(3, np.nan))
+                       for t, m in zip(self._tracks, moved, strict=True)}
+        return super()._update(estimate, predicted)
 
 
 def record_bag(bag: Path, params: EndeffParams | None = None) -> tuple[str, list[Frame]]:
     """Every track of every frame of one bag, as the tracker ran it."""
-    tracker = _RecordingTracker(params or EndeffParams())
+    tracker = _FlowRecordingTracker(params or EndeffParams())
     frames: list[Frame] = []
     stamp, last = 0, 0
     for f in tracked_frames(bag, tracker):
@@ -62,13 +75,18 @@ def record_bag(bag: Path, params: EndeffParams | None = None) -> tuple[str, list
         flags = np.array([t.id in published for t in states], dtype=bool)
         shown = np.array([t.position for t in f.tracks], dtype=np.float64).reshape(-1, 3)
         fresh = np.array([t.age == 1 for t in states], dtype=bool)
-        frames.append((f.index, stamp, ids, raw, flags, shown, f.gt, f.keys, f.kinds, fresh))
+        nan = np.full(3, np.nan)
+        motion = np.array([nan if new else getattr(tracker, 'motion', {}).get(t.id, nan)
+                           for t, new in zip(states, fresh, strict=True)]).reshape(-1, 3)
+        frames.append((f.index, stamp, ids, raw, flags, shown, f.gt, f.keys, f.kinds, fresh,
+                       motion))
     return bag.name, frames
 
 
 def one_euro_step(p: OneEuroParams) -> Step:
     """The tracker's filter as a replay step (state: raw, filtered, velocity)."""
-    def step(raw: np.ndarray, states: list[Any], dt: np.ndarray) -> tuple[np.ndarray, list[Any]]:
+    def step(raw: np.ndarray, states: list[Any], dt: np.ndarray,
+             _: np.ndarray) -> tuple[np.ndarray, list[Any]]:
         out, vel = raw.copy(), np.zeros_like(raw)
         old = np.array([s is not None for s in states], dtype=bool)
         if old.any():
@@ -82,7 +100,8 @@ def one_euro_step(p: OneEuroParams) -> Step:
 def kalman_step(q: float, r: float, reset: float = 0.2, max_lag: float = 0.05) -> Step:
     """Constant-velocity Kalman filter per axis: white-acceleration noise ``q`` (m²/s³),
     measurement noise ``r`` (m, standard deviation). State: raw, x, v, covariance (2x2)."""
-    def step(raw: np.ndarray, states: list[Any], dt: np.ndarray) -> tuple[np.ndarray, list[Any]]:
+    def step(raw: np.ndarray, states: list[Any], dt: np.ndarray,
+             _: np.ndarray) -> tuple[np.ndarray, list[Any]]:
         out, new = raw.copy(), []
         for k, (z, s, h) in enumerate(zip(raw, states, dt, strict=True)):
             if s is None or np.linalg.norm(z - s[0]) > reset:
@@ -108,17 +127,42 @@ def kalman_step(q: float, r: float, reset: float = 0.2, max_lag: float = 0.05) -
     return step
 
 
+def flow_step(gain: float, reset: float = 0.2, max_lag: float = 0.05,
+              then: OneEuroParams | None = None) -> Step:
+    """A complementary filter: the last output moved by the scene flow's motion of the track
+    (none: no motion) is the prediction, corrected toward the raw position by ``gain``;
+    ``then``: a One Euro filter of that output. State: raw, output, (One Euro state)."""
+    euro = one_euro_step(then) if then is not None else None
+
+    def step(raw: np.ndarray, states: list[Any], dt: np.ndarray,
+             motion: np.ndarray) -> tuple[np.ndarray, list[Any]]:
+        out = raw.copy()
+        for k, (z, s) in enumerate(zip(raw, states, strict=True)):
+            if s is None or np.linalg.norm(z - s[0]) > reset:
+                continue
+            pred = s[1] + np.nan_to_num(motion[k])
+            x = pred + gain * (z - pred)
+            lag = x - z
+            n = np.linalg.norm(lag)
+            out[k] = z + lag * (max_lag / n) if max_lag > 0 and n > max_lag else x
+        if euro is None:
+            return out, [(z, o, None) for z, o in zip(raw, out, strict=True)]
+        shown, inner = euro(out, [None if s is None else s[2] for s in states], dt, motion)
+        return shown, [(z, o, i) for z, o, i in zip(raw, out, inner, strict=True)]
+    return step
+
+
 def replay(frames: list[Frame], step: Step) -> list[np.ndarray]:
-    """The positions ``step`` publishes in each frame (a track absent from the frame before
-    starts again)."""
+    """The positions ``step`` publishes in each frame (a new track starts again; an id given
+    back to a track continues from its state when it was lost)."""
     states: dict[int, tuple[int, Any]] = {}  # track id -> (stamp, filter state)
     shown = []
-    for _, stamp, ids, raw, flags, *_, fresh in frames:
+    for _, stamp, ids, raw, flags, *_, fresh, motion in frames:
         last = [(stamp, None) if f else states.get(int(i), (stamp, None))
                 for i, f in zip(ids, fresh, strict=True)]
         dt = np.array([(stamp - s) * 1e-9 for s, _ in last])
-        out, new = step(raw, [st for _, st in last], dt)
-        states = {int(i): (stamp, s) for i, s in zip(ids, new, strict=True)}
+        out, new = step(raw, [st for _, st in last], dt, motion)
+        states.update({int(i): (stamp, s) for i, s in zip(ids, new, strict=True)})
         shown.append(out[flags])
     return shown
 
@@ -128,8 +172,8 @@ def score(frames: list[Frame], shown: list[np.ndarray]) -> dict[str, float]:
     scorer = TrackingScorer()
     n_gt = n_est = tp = 0
     err = 0.0
-    for (index, stamp, ids, _, flags, _, gt, keys, kinds, _), pos in zip(frames, shown,
-                                                                      strict=True):
+    for (index, stamp, ids, _, flags, _, gt, keys, kinds, *_), pos in zip(frames, shown,
+                                                                       strict=True):
         if gt is None:
             continue
         fs = score_frame(pos, gt)
@@ -148,13 +192,17 @@ def variants() -> dict[str, Step]:
     base = OneEuroParams(p.smoothing_min_cutoff, p.smoothing_beta, p.smoothing_d_cutoff,
                          p.smoothing_max_lag, p.smoothing_reset_distance)
     out: dict[str, Step] = {'one_euro_default': one_euro_step(base),
-                            'raw': lambda r, s, d: (r.copy(), [None] * len(r))}
+                            'raw': lambda r, s, d, m: (r.copy(), [None] * len(r))}
     for name, change in (('beta3', {'beta': 3.0}), ('beta20', {'beta': 20.0}),
                          ('min_cutoff1', {'min_cutoff': 1.0}), ('d_cutoff2', {'d_cutoff': 2.0}),
                          ('max_lag3cm', {'max_lag': 0.03})):
         out[f'one_euro_{name}'] = one_euro_step(base._replace(**change))
     for q, r in ((5.0, 0.02), (20.0, 0.01), (80.0, 0.01)):
         out[f'kalman_q{q:g}_r{r:g}'] = kalman_step(q, r, base.reset_distance, base.max_lag)
+    for gain in (0.3, 0.5, 0.7):
+        out[f'flow_gain{gain:g}'] = flow_step(gain, base.reset_distance, base.max_lag)
+        out[f'flow_gain{gain:g}_one_euro'] = flow_step(gain, base.reset_distance, base.max_lag,
+                                                       base)
     return out
 
 
