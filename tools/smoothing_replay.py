@@ -153,8 +153,8 @@ def flow_step(gain: float, reset: float = 0.2, max_lag: float = 0.05,
 
 
 def replay(frames: list[Frame], step: Step) -> list[np.ndarray]:
-    """The positions ``step`` publishes in each frame (a new track starts again; an id given
-    back to a track continues from its state when it was lost)."""
+    """The positions ``step`` publishes in each frame (a track absent from the frame before
+    starts again)."""
     states: dict[int, tuple[int, Any]] = {}  # track id -> (stamp, filter state)
     shown = []
     for _, stamp, ids, raw, flags, *_, fresh, motion in frames:
@@ -162,7 +162,7 @@ def replay(frames: list[Frame], step: Step) -> list[np.ndarray]:
                 for i, f in zip(ids, fresh, strict=True)]
         dt = np.array([(stamp - s) * 1e-9 for s, _ in last])
         out, new = step(raw, [st for _, st in last], dt, motion)
-        states.update({int(i): (stamp, s) for i, s in zip(ids, new, strict=True)})
+        states = {int(i): (stamp, s) for i, s in zip(ids, new, strict=True)}
         shown.append(out[flags])
     return shown
 
