@@ -17,7 +17,11 @@ a match to track B after the last match was to track A != B. Its cause, in this 
 Each cause counts per kind (head, hand, foot; ``other``); ``entity_changed`` counts the
 switches whose B lies in another entity than A did at its last match, and ``gap`` the frames
 between the two matches (1: consecutive), as a histogram (1, 2-3, 4-9, 10+), overall and per
-cause. A tally for the tracker's work, not a score.
+cause; a duplicate's A is on its prediction or detected (``duplicate_*:old_predicted`` /
+``old_detected``). ``windows`` gives, per stretch of a bag's frames (:data:`WINDOWS`), its
+switches and its end-effector minutes (labels at 30 Hz), and their ratio: whether switches
+come with a track's start or through the whole bag. A tally for the tracker's work, not a
+score.
 
     python -m tools.id_switches BAG_OR_DIR [...] [--every N] [--params YAML] [--jobs 2]
                                 [--json OUT]
@@ -32,12 +36,15 @@ import numpy as np
 
 from endeff_ros.cli_common import print_json
 from endeff_ros.core.params import EndeffParams
+from endeff_ros.core.types import Track
 from endeff_ros.scoring import score_frame
 from tools.per_bag import parse_bag_args, run_per_bag
 from tools.track_history import _RecordingTracker, tracked_frames
 
 CAUSES = ('lost_new', 'lost_other', 'swap', 'duplicate_new', 'duplicate_old')
 GAPS = ((1, 1), (2, 3), (4, 9), (10, 10**9))
+#: Stretches of a bag, in frames from its first: the first second and the rest.
+WINDOWS = ((0, 10), (10, 30), (30, 10**9))
 
 
 def _gap_name(gap: int) -> str:
@@ -45,6 +52,12 @@ def _gap_name(gap: int) -> str:
         if lo <= gap <= hi:
             return f'{lo}' if lo == hi else f'{lo}+' if hi > 10**6 else f'{lo}-{hi}'
     return '?'
+
+
+def _window(index: int) -> str:
+    """The name of the stretch of :data:`WINDOWS` that frame ``index`` lies in."""
+    lo, hi = next(w for w in WINDOWS if w[0] <= index < w[1])
+    return f'frames_{lo}+' if hi > 10**6 else f'frames_{lo}-{hi - 1}'
 
 
 def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
@@ -55,6 +68,7 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
     last: dict[int, tuple[int, int, int]] = {}  # gt key -> (frame, track id, entity)
     born: dict[int, int] = {}  # track id -> frame it was first published (this life)
     why_dropped: dict[int, str] = {}
+    windows = {_window(lo): {'switches': 0, 'labels': 0} for lo, _ in WINDOWS}
     matches = 0
     for index, tracks, dropped, gt, keys, kinds, _ in tracked_frames(bag, tracker):
         for track_id, why in dropped.items():
@@ -64,6 +78,7 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
             born.setdefault(t.id, index)
         if gt is None:
             continue
+        windows[_window(index)]['labels'] += len(gt)
         pos = np.array([t.position for t in tracks]).reshape(-1, 3)
         score = score_frame(pos, gt)
         by_id = {t.id: t for t in tracks}
@@ -84,6 +99,9 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
             else:
                 cause = 'duplicate_new' if born[track.id] > t0 else 'duplicate_old'
                 detail_key = cause
+                state = 'predicted' if by_id[a].state == Track.PREDICTED else 'detected'
+                detail[f'{cause}:old_{state}'] = detail.get(f'{cause}:old_{state}', 0) + 1
+            windows[_window(index)]['switches'] += 1
             kind = str(kinds[g])
             c = counts.setdefault(kind, dict.fromkeys(CAUSES, 0))
             c[cause] += 1
@@ -93,7 +111,8 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
                 detail[name] = detail.get(name, 0) + 1
             if track.entity != entity:
                 detail['entity_changed'] = detail.get('entity_changed', 0) + 1
-    return {'bag': bag.name, 'matches': matches, 'switches': counts, 'detail': detail}
+    return {'bag': bag.name, 'matches': matches, 'switches': counts, 'detail': detail,
+            'windows': windows}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -103,7 +122,14 @@ def main(argv: list[str] | None = None) -> int:
     total = {k: {c: sum(r['switches'].get(k, {}).get(c, 0) for r in per_bag) for c in CAUSES}
              for k in kinds}
     details = sorted({d for r in per_bag for d in r['detail']})
+    windows = {}
+    for name in per_bag[0]['windows'] if per_bag else ():
+        switches = sum(r['windows'][name]['switches'] for r in per_bag)
+        minutes = sum(r['windows'][name]['labels'] for r in per_bag) / (30 * 60)
+        windows[name] = {'switches': switches, 'end_effector_minutes': round(minutes, 3),
+                         'per_minute': round(switches / minutes, 2) if minutes else None}
     print_json({'matches': sum(r['matches'] for r in per_bag),
+                'windows': windows,
                 'switches': {c: sum(total[k][c] for k in kinds) for c in CAUSES},
                 'per_kind': total,
                 'detail': {d: sum(r['detail'].get(d, 0) for r in per_bag) for d in details},
