@@ -83,12 +83,14 @@ def test_learnt_from_the_stream_a_person_does_not_hide_the_edge():
     assert np.allclose(edges.left.line * STRIDE, 41, atol=2)
 
 
-def _cut_person(cut: bool) -> list[float]:
+def _cut_person(cut: bool, bottom_rows: int = 16) -> list[float]:
     """Heights above the image's bottom margin (px) of the ends found on a person whose legs
-    the Kinect's bottom margin cuts (1.6 m from the camera), tracked and single-frame."""
+    the Kinect's bottom margin (``bottom_rows`` deep) cuts (1.6 m from the camera), tracked
+    and single-frame."""
     depth = room()
     add_person(depth, 0.0, 0.6, z=1.6)
     depth = kinect_margins(depth)
+    depth[480 - bottom_rows:] = np.nan
     params = PARAMS.replace(cut_dead_margins=cut, background=False)
     tracker = Tracker(params)
     for k in range(3):
@@ -96,14 +98,22 @@ def _cut_person(cut: bool) -> list[float]:
                                           depth=depth, intrinsics=K))
     est = estimate_frame(RGBDFrame(stamp_ns=0, frame_id='camera', depth=depth,
                                    intrinsics=K), params)
-    tracked = [464 - (K.fy * t.position[1] / t.position[2] + K.cy) for t in result.tracks]
-    single = [464 - (K.fy * p[1] / p[2] + K.cy) for p in est.positions()]
+    edge = 480 - bottom_rows
+    tracked = [edge - (K.fy * t.position[1] / t.position[2] + K.cy) for t in result.tracks]
+    single = [edge - (K.fy * p[1] / p[2] + K.cy) for p in est.positions()]
     return tracked + single
 
 
-def test_a_body_cut_by_the_bottom_margin_has_no_end_there():
-    assert min(_cut_person(False)) < 60  # the cut legs' ends, above the margin's edge
-    assert min(_cut_person(True)) > 60
+def test_a_body_cut_by_a_deep_margin_has_no_end_there():
+    assert min(_cut_person(False, 48)) < 60  # the cut legs' ends, above the margin's edge
+    assert min(_cut_person(True, 48)) > 60
+
+
+def test_a_thin_margin_cuts_no_end():
+    """The Kinect's bottom band (16 rows, 3 % of the image) hides a few centimetres of what
+    ends in it: the end at its edge is kept, as without the rule."""
+    assert min(_cut_person(True)) < 60
+    assert sorted(_cut_person(True)) == sorted(_cut_person(False))
 
 
 def test_the_edges_are_fitted_again_only_when_a_sides_profile_moves(monkeypatch):

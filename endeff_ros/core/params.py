@@ -181,8 +181,9 @@ class EndeffParams:
     cut_dead_margins: bool = _p(True, 'Count the edge of the dead margins of registered depth '
                                 '(bands or corners along the border where the sensor never '
                                 'reads, learnt from the stream) as the image border for cut '
-                                'ends; an edge that is no straight line along a side is the '
-                                "scene's, not a margin.")
+                                'ends where they are at least 5 % of the image deep; an edge '
+                                "that is no straight line along a side is the scene's, not a "
+                                'margin.')
     tip_depth: float = _p(0.14, 'Geodesic depth of the terminal part behind its extreme: '
                           'its points give the part radius, axis and centre.', unit='m',
                           lo=0.0, hi=1.0)
