@@ -39,7 +39,7 @@ from tools.track_history import _RecordingTracker, tracked_frames
 #: the positions published, the truth with its keys and kinds (None: no truth), which
 #: tracks are new in the frame (a revived id is a new track: its filter starts again) and
 #: each track's motion since the frame before by the scene flow (its anchor's prediction,
-#: :meth:`Tracker._predict`; NaN for a new track or without a colour pair).
+#: :meth:`Tracker._predict`: zero without a colour pair; NaN for a new track).
 Frame = tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, Any, Any,
               np.ndarray, np.ndarray]
 #: A filter step for the tracks of one frame: (raw, state or None per track, dt, scene-flow
@@ -50,11 +50,11 @@ Step = Callable[[np.ndarray, list[Any], np.ndarray, np.ndarray], tuple[np.ndarra
 class _FlowRecordingTracker(_RecordingTracker):
     """Also keeps, per track id, the motion its anchor's prediction gave in the last update."""
 
+    motion: dict[int, np.ndarray] = {}  # noqa: RUF012 - replaced, never mutated
+
     def _update(self, estimate, predicted):  # type: ignore[no-untyped-def]
-        moved = predicted - self._anchors()
-        flowed = self._prev is not None and self._prev.color is not None
-        self.motion = {t.id: (m if flowed else np.full(3, np.nan))
-                       for t, m in zip(self._tracks, moved, strict=True)}
+        self.motion = dict(zip([t.id for t in self._tracks], predicted - self._anchors(),
+                               strict=True))
         return super()._update(estimate, predicted)
 
 
@@ -76,7 +76,7 @@ def record_bag(bag: Path, params: EndeffParams | None = None) -> tuple[str, list
         shown = np.array([t.position for t in f.tracks], dtype=np.float64).reshape(-1, 3)
         fresh = np.array([t.age == 1 for t in states], dtype=bool)
         nan = np.full(3, np.nan)
-        motion = np.array([nan if new else getattr(tracker, 'motion', {}).get(t.id, nan)
+        motion = np.array([nan if new else tracker.motion.get(t.id, nan)
                            for t, new in zip(states, fresh, strict=True)]).reshape(-1, 3)
         frames.append((f.index, stamp, ids, raw, flags, shown, f.gt, f.keys, f.kinds, fresh,
                        motion))
@@ -95,6 +95,14 @@ def one_euro_step(p: OneEuroParams) -> Step:
                                           [s[2] for s in prev], dt[old], p)
         return out, [(r, o, w) for r, o, w in zip(raw, out, vel, strict=True)]
     return step
+
+
+def _bound_lag(x: np.ndarray, z: np.ndarray, max_lag: float) -> np.ndarray:
+    """``x`` pulled back to within ``max_lag`` of the raw position ``z`` (0: unbounded), as
+    the tracker's filter bounds its lag."""
+    lag = x - z
+    n = np.linalg.norm(lag)
+    return z + lag * (max_lag / n) if max_lag > 0 and n > max_lag else x
 
 
 def kalman_step(q: float, r: float, reset: float = 0.2, max_lag: float = 0.05) -> Step:
@@ -117,10 +125,7 @@ def kalman_step(q: float, r: float, reset: float = 0.2, max_lag: float = 0.05) -
             innov = z - xp
             x, v = xp + gain[0] * innov, vp + gain[1] * innov
             cov = cov - np.outer(gain, cov[0])
-            lag = x - z
-            n = np.linalg.norm(lag)
-            if max_lag > 0 and n > max_lag:
-                x = z + lag * (max_lag / n)
+            x = _bound_lag(x, z, max_lag)
             out[k] = x
             new.append((z, x, v, cov))
         return out, new
@@ -141,10 +146,7 @@ def flow_step(gain: float, reset: float = 0.2, max_lag: float = 0.05,
             if s is None or np.linalg.norm(z - s[0]) > reset:
                 continue
             pred = s[1] + np.nan_to_num(motion[k])
-            x = pred + gain * (z - pred)
-            lag = x - z
-            n = np.linalg.norm(lag)
-            out[k] = z + lag * (max_lag / n) if max_lag > 0 and n > max_lag else x
+            out[k] = _bound_lag(pred + gain * (z - pred), z, max_lag)
         if euro is None:
             return out, [(z, o, None) for z, o in zip(raw, out, strict=True)]
         shown, inner = euro(out, [None if s is None else s[2] for s in states], dt, motion)
