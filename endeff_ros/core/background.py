@@ -220,6 +220,16 @@ STILL_LEARNING_FRAMES = 2
 #: marked, at the depth it had: a still person joined by a shelf beside them is still kept,
 #: a wall that a marked hand once touched is not.
 INITIAL_FRACTION = 0.05
+#: A person's flag (:meth:`BackgroundModel.mark`'s ``person_points``) covers the pixels their
+#: entity's points project on, grown by this many strided pixels.
+PERSON_GROW_PX = 2
+#: A marked entity stays after ``background_person_s`` when its end-effectors were taken for
+#: a person's in at least this share of the frames an end-effector lay on it until then. A
+#: still entity shows the same shape in every frame, so a verdict it gets in a few of them is
+#: the kinds' noise: of the furniture of the start that one vote kept on the dev split's
+#: furnished subset, 3 of 10 were taken in 20-38 % of the frames, every person of the start
+#: in all of them.
+PERSON_SHARE = 0.5
 
 
 def _margin(depth: npt.NDArray[np.float32], base: float) -> npt.NDArray[np.float32]:
@@ -415,9 +425,12 @@ class BackgroundModel:
         # Entities of the start: their pixels' depth when marked (0: not marked).
         self._init_z = np.zeros(shape, np.float32)
         self._marking = initial and params.background_keep_initial
-        # ... and those whose ends were taken for a person's (:meth:`protect`'s ``person``);
-        # the others are forgotten at _release_at (None: never, ``background_keep_furniture``).
-        self._init_person = np.zeros(shape, bool)
+        # ... the frames in which an end-effector lay on them (:meth:`protect`'s tracks), and
+        # those in which one was taken for a person's (``person``); those taken in fewer than
+        # PERSON_SHARE of their frames are forgotten at _release_at (None: never,
+        # ``background_keep_furniture``).
+        self._init_seen = np.zeros(shape, np.uint16)
+        self._init_votes = np.zeros(shape, np.uint16)
         self._release_at = (None if params.background_keep_furniture or not self._marking
                             else t + params.background_learn_s + params.background_person_s)
         self._learn_until = t + params.background_learn_s
@@ -736,8 +749,16 @@ class BackgroundModel:
         is marked and at that depth. A marked pixel whose farther reading the background
         adopted is forgotten: what was there has left."""
         if self._release_at is not None and self._t >= self._release_at:
-            # The entities of the start that showed no person's end by now are furniture.
-            self._init_z[~self._init_person] = 0
+            # The entities of the start that showed no person's end by now are furniture,
+            # certified static at once: joined to a person's component (a shelf beside them),
+            # they would otherwise stay with it for as long as they touch.
+            person = (self._init_votes > 0) & (self._init_votes >= PERSON_SHARE
+                                               * self._init_seen)
+            furniture = (self._init_z > 0) & ~person
+            # Where this frame has no reading, at the depth it was marked at.
+            self._static_z[furniture] = np.where(d > 0, d, self._init_z)[furniture]
+            self._static_since[furniture] = self._t - STATIC_S
+            self._init_z[~person] = 0
             self._release_at = None
         marked = self._init_z > 0
         if not marked.any():
@@ -747,7 +768,8 @@ class BackgroundModel:
         return _enough(labels, there, total, INITIAL_FRACTION, stride), there
 
     def mark(self, positions: npt.NDArray[np.float64], intrinsics: Intrinsics,
-             stride: int, person: npt.ArrayLike | None = None) -> None:
+             stride: int, person: npt.ArrayLike | None = None,
+             person_points: npt.NDArray[np.float64] | None = None) -> None:
         """While the background learns after the start or a reset (``background_keep_initial``),
         mark the components of the last frame holding end-effectors at ``positions`` (N, 3)
         metres, optical frame: they stay foreground for as long as they stay where they are
@@ -757,21 +779,27 @@ class BackgroundModel:
         estimator) calls this with its end-effectors, and goes on calling it after the
         learning. ``person`` (aligned with ``positions``; None: all, and the marks are kept
         for good, ``background_keep_furniture``): the end-effectors that may belong to a
-        person (:func:`.kinds.may_be_person`). A marked entity none of whose end-effectors was
-        flagged while learning or within ``background_person_s`` after it is forgotten then,
-        and learnt as background: furniture, by the kinds of a whole second (a person's ends
-        are often not yet taken for a person's in the first frames, a cabinet's sometimes
-        are)."""
+        person (:func:`.kinds.may_be_person`). A marked entity whose end-effectors were flagged
+        in fewer than :data:`PERSON_SHARE` of the frames an end-effector lay on it, while
+        learning and within ``background_person_s`` after it, is forgotten then and learnt as
+        background: furniture, by the kinds of a whole second (a person's ends are often not
+        yet taken for a person's in the first frames, a cabinet's now and then are). ``person_points`` (optional): the points of the flagged end-effectors' entities;
+        only the pixels they cover keep their marks, so furniture that the depth labelling
+        joins to a person (a shelf they stand beside) is learnt as background with the rest,
+        certified static (:meth:`foreground` keeps certified pixels out of a component that
+        stays foreground)."""
         if self.marking:
-            self._hits(positions, intrinsics, stride, person)
+            self._hits(positions, intrinsics, stride, person, person_points)
 
     def _hits(self, positions: npt.NDArray[np.float64], intrinsics: Intrinsics, stride: int,
-              person: npt.ArrayLike | None = None
+              person: npt.ArrayLike | None = None,
+              person_points: npt.NDArray[np.float64] | None = None
               ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.int64], npt.NDArray[np.int32]]:
         """Where ``positions`` project on the strided image (usable ones: ``ok``, their
         pixels ``uv``) and the component each lies on (``hit``, 0: none); the components hit
         restart their absorption clock and, while marking, the components of the positions
-        flagged ``person`` (aligned with ``positions``; None: all) are marked."""
+        flagged ``person`` (aligned with ``positions``; None: all) are marked, within the
+        pixels of ``person_points`` when given (:meth:`mark`)."""
         labels = self._labels
         pts = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
         with np.errstate(divide='ignore', invalid='ignore'):
@@ -792,11 +820,14 @@ class BackgroundModel:
                     mark = held & (self._init_z == 0) & (self._last.depth > 0)
                     self._init_z[mark] = self._last.depth[mark]
                 if person is not None:
+                    self._init_seen[held & (self._init_z > 0)] += 1
                     flags = np.asarray(person, dtype=bool).reshape(-1)[ok]
                     on_track[:] = False
                     on_track[hit[(hit > 0) & flags]] = True
                     held = np.take(on_track, labels)
-                self._init_person |= held & (self._init_z > 0)
+                    if person_points is not None:
+                        held &= self._point_pixels(person_points, intrinsics, stride)
+                    self._init_votes[held & (self._init_z > 0)] += 1
         return ok, uv, hit
 
     @property
@@ -818,6 +849,22 @@ class BackgroundModel:
         ``background_person_s``); otherwise they are not read, and callers pass None."""
         return self.marking and self._release_at is not None
 
+    def _point_pixels(self, points: npt.NDArray[np.float64], intrinsics: Intrinsics,
+                      stride: int) -> npt.NDArray[np.bool_]:
+        """The pixels of the strided image that ``points`` (N, 3, optical frame) project on,
+        grown by :data:`PERSON_GROW_PX` (the cloud's points are voxel means, sparser than the
+        pixels, and a person's outline pixels may hold no point)."""
+        shape = self._labels.shape
+        out = np.zeros(shape, np.uint8)
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        pts = pts[pts[:, 2] > 1e-6]
+        u = np.round((intrinsics.fx * pts[:, 0] / pts[:, 2] + intrinsics.cx) / stride)
+        v = np.round((intrinsics.fy * pts[:, 1] / pts[:, 2] + intrinsics.cy) / stride)
+        inside = (u >= 0) & (u < shape[1]) & (v >= 0) & (v < shape[0])
+        out[v[inside].astype(np.intp), u[inside].astype(np.intp)] = 1
+        k = 2 * PERSON_GROW_PX + 1
+        return cv2.dilate(out, np.ones((k, k), np.uint8)).view(bool)
+
     def _track_labels(self, labels: npt.NDArray[np.int32],
                       uv: npt.NDArray[np.int64]) -> npt.NDArray[np.int32]:
         """Per pixel (u, v) of the strided image, the most frequent label around it (0:
@@ -831,7 +878,8 @@ class BackgroundModel:
     def protect(self, positions: npt.NDArray[np.float64], ids: list[int],
                 intrinsics: Intrinsics, stride: int,
                 detected: npt.ArrayLike | None = None,
-                person: npt.ArrayLike | None = None) -> None:
+                person: npt.ArrayLike | None = None,
+                person_points: npt.NDArray[np.float64] | None = None) -> None:
         """Tell the model where the tracks are: ``positions`` (N, 3) metres, optical frame,
         the surface anchors of the tracks with ``ids`` after the last frame. Their
         components restart the absorption clock (a tracked person standing still is not
@@ -847,10 +895,10 @@ class BackgroundModel:
         for as long as the prediction lives. ``stride``: the pixel stride the last frame was
         labelled at. While learning after the start or a reset, the components of the tracks
         are marked as entities of the start, and those of the tracks flagged ``person`` (None:
-        all) keep their marks (:meth:`mark`)."""
+        all) keep their marks, within ``person_points`` when given (:meth:`mark`)."""
         if self._labels is None or self._bg is None:
             return
-        ok, uv, hit = self._hits(positions, intrinsics, stride, person)
+        ok, uv, hit = self._hits(positions, intrinsics, stride, person, person_points)
         track_ids = np.asarray(ids, dtype=np.int64).reshape(-1)[ok]
         seen = (np.ones(len(ok), bool) if detected is None
                 else np.asarray(detected, dtype=bool).reshape(-1))[ok]

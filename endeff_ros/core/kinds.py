@@ -448,6 +448,21 @@ def may_be_person(kind: int, shape: EntityShape | None) -> bool:
     return shape.top - shape.bottom < PERSON_LOW_SPAN
 
 
+def person_points(estimate: FrameEstimate, entities: Sequence[int],
+                  flags: Sequence[bool] | None) -> npt.NDArray[np.float64] | None:
+    """The points of the entities of ``estimate`` that hold an end flagged ``flags`` (aligned
+    with ``entities``, each end's entity index), for the static background's entities of the
+    start (:meth:`.background.BackgroundModel.mark`): a person's flag covers their own points,
+    not furniture that the depth labelling joins to them. None (the whole component keeps its
+    flag, people first) without flags or when a flagged end's entity is not known."""
+    if flags is None:
+        return None
+    flagged = {int(e) for e, f in zip(entities, flags, strict=True) if f}
+    if not flagged <= {ent.entity for ent in estimate.entities}:
+        return None
+    return estimate.points[np.isin(estimate.entity, list(flagged))]
+
+
 def person_candidates(estimate: FrameEstimate, intrinsics: Intrinsics | None = None,
                       labeller: KindLabeller | None = None) -> npt.NDArray[np.bool_]:
     """Per candidate of ``estimate`` (in :meth:`FrameEstimate.positions` order): whether it

@@ -67,7 +67,7 @@ from .graph import (
     distance_to_path,
     path_to_sources,
 )
-from .kinds import KindLabeller
+from .kinds import KindLabeller, person_points
 from .nearest import nearest_point
 from .params import EndeffParams
 from .readable import ReadableArea
@@ -318,7 +318,9 @@ class Tracker:
             self.background.protect(self._anchors(), [t.id for t in self._tracks],
                                     frame.intrinsics, self.params.pixel_stride,
                                     detected=[t.detected for t in self._tracks],
-                                    person=person)
+                                    person=person,
+                                    person_points=person_points(
+                                        estimate, [t.entity for t in tracks], person))
         shown = [t for t in tracks if t.confidence >= self.params.min_confidence]
         return TrackerResult(frame.stamp_ns, frame.frame_id, shown, estimate, stages)
 
