@@ -156,10 +156,12 @@ def test_person_in_front_of_no_reading_is_found():
     assert all(c == 0 for _, c in found[20:])
 
 
-def _pedestal_with_arm(dropouts: bool) -> tuple[BackgroundModel, list[int]]:
+def _pedestal_with_arm(dropouts: bool, *, mark: bool = False,
+                       params: EndeffParams = PARAMS) -> tuple[BackgroundModel, list[int]]:
     """A static pedestal with an arm swinging up and down from its top, 45 frames; with
-    ``dropouts`` the sensor loses every fourth row of the pedestal (no reading). Returns the
-    model and the pedestal's foreground points per frame."""
+    ``dropouts`` the sensor loses every fourth row of the pedestal (no reading); with
+    ``mark`` its end-effectors mark it as an entity of the start, never taken for a
+    person's. Returns the model and the pedestal's foreground points per frame."""
     model = BackgroundModel()
     pedestal = []
     for k in range(45):
@@ -176,7 +178,10 @@ def _pedestal_with_arm(dropouts: bool) -> tuple[BackgroundModel, list[int]]:
         depth[arm > 0] = 2.5
         f = frame(k, depth)
         f.depth[lost & (arm == 0)] = 0.0  # no reading
-        est = estimate_frame(f, PARAMS, background=model)
+        est = estimate_frame(f, params, background=model)
+        if mark:
+            pos = est.positions()
+            model.mark(pos, K, params.pixel_stride, np.zeros(len(pos), bool))
         pedestal.append(int(np.count_nonzero((np.abs(est.points[:, 0]) < 0.1)
                                              & (est.points[:, 1] > CAMERA_HEIGHT - 0.6))))
     return model, pedestal

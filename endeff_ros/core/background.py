@@ -679,7 +679,7 @@ class BackgroundModel:
                                    cv2.MORPH_OPEN,
                                    np.ones((3, 3), np.uint8)).view(bool)
         moving = _enough(labels, changed, total, MIN_CHANGED_FRACTION, stride)
-        initial, there = self._initial_labels(d, labels, total, margin, adopt, stride)
+        initial, there = self._initial_labels(d, labels, total, margin, adopt, stride, moving)
         # Components with changed pixels renew the hold (below); one that moves by colour
         # alone only on the surface that also stirred within COLOR_CONFIRM_S.
         renew = np.take(moving, labels)  # moving[labels], 2-3x faster
@@ -742,19 +742,26 @@ class BackgroundModel:
 
     def _initial_labels(self, d: npt.NDArray[np.float32], labels: npt.NDArray[np.int32],
                         total: npt.NDArray[np.int64], margin: npt.NDArray[np.float32],
-                        adopt: npt.NDArray[np.bool_], stride: int
+                        adopt: npt.NDArray[np.bool_], stride: int,
+                        moving: npt.NDArray[np.bool_]
                         ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
         """Per label, whether it is an entity of the start that stays where it was
         (``INITIAL_FRACTION`` of its pixels at their marked depth), and per pixel whether it
         is marked and at that depth. A marked pixel whose farther reading the background
-        adopted is forgotten: what was there has left."""
+        adopted is forgotten: what was there has left. ``moving``: per label, whether it has
+        changed pixels in this frame."""
         if self._release_at is not None and self._t >= self._release_at:
             # The entities of the start that showed no person's end by now are furniture,
-            # certified static at once: joined to a person's component (a shelf beside them),
-            # they would otherwise stay with it for as long as they touch.
+            # certified static at once where nothing moves with them: joined to a still
+            # person's component (a shelf beside them), they would otherwise stay with it for
+            # as long as they touch. Not in a component that moves or moved within HOLD_S: a
+            # robot's pedestal stays with its moving arm.
             person = (self._init_votes > 0) & (self._init_votes >= PERSON_SHARE
                                                * self._init_seen)
-            furniture = (self._init_z > 0) & ~person
+            recent = np.bincount(labels[self._t - self._kept_t <= HOLD_S],
+                                 minlength=len(moving)) > 0
+            active = np.take(moving | recent[:len(moving)], labels)
+            furniture = (self._init_z > 0) & ~person & ~active
             # Where this frame has no reading, at the depth it was marked at.
             self._static_z[furniture] = np.where(d > 0, d, self._init_z)[furniture]
             self._static_since[furniture] = self._t - STATIC_S
