@@ -790,9 +790,10 @@ class BackgroundModel:
         in fewer than :data:`PERSON_SHARE` of the frames an end-effector lay on it, while
         learning and within ``background_person_s`` after it, is forgotten then and learnt as
         background: furniture, by the kinds of a whole second (a person's ends are often not
-        yet taken for a person's in the first frames, a cabinet's now and then are). ``person_points`` (optional): the points of the flagged end-effectors' entities;
-        only the pixels they cover keep their marks, so furniture that the depth labelling
-        joins to a person (a shelf they stand beside) is learnt as background with the rest,
+        yet taken for a person's in the first frames, a cabinet's now and then are).
+        ``person_points`` (optional): the points of the flagged end-effectors' entities; only
+        the pixels they cover keep their marks, so furniture that the depth labelling joins
+        to a still person (a shelf they stand beside) is learnt as background with the rest,
         certified static (:meth:`foreground` keeps certified pixels out of a component that
         stays foreground)."""
         if self.marking:
