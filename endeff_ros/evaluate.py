@@ -117,7 +117,12 @@ def _background_estimate() -> EstimateFn:
     """The default single-frame estimator with its own static background (one per bag, as
     the tracker has), so both estimators see the same foreground."""
     from endeff_ros.core.background import BackgroundModel
-    from endeff_ros.core.kinds import KindLabeller, person_candidates, person_points
+    from endeff_ros.core.kinds import (
+        KindLabeller,
+        judged_candidates,
+        person_candidates,
+        person_points,
+    )
     from endeff_ros.core.single_frame import estimate_frame
 
     model, labeller = BackgroundModel(), KindLabeller()
@@ -136,7 +141,8 @@ def _background_estimate() -> EstimateFn:
                       if model.wants_people else None)
             entities = [e.entity for e in estimate.entities for _ in e.candidates]
             model.mark(estimate.positions(), frame.intrinsics, params.pixel_stride, person,
-                       person_points(estimate, entities, person))
+                       person_points(estimate, entities, person),
+                       None if person is None else judged_candidates(estimate, person))
         return estimate
 
     return estimate

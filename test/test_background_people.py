@@ -30,7 +30,12 @@ from test_background import (
 )
 
 from endeff_ros.core.background import BackgroundModel
-from endeff_ros.core.kinds import KindLabeller, person_candidates
+from endeff_ros.core.kinds import (
+    MIN_PERSON_ENDS,
+    KindLabeller,
+    judged_candidates,
+    person_candidates,
+)
 from endeff_ros.core.single_frame import estimate_frame
 from endeff_ros.core.tracker import Tracker
 from endeff_ros.core.types import KINECT_640 as K
@@ -246,15 +251,17 @@ def test_an_entity_of_the_start_stays_while_it_may_still_show_a_person():
 
 
 
-def _start_run(params, flag, *, frames: int = 15):
+def _start_run(params, flag, *, frames: int = 15, judged=None):
     """The single-frame estimator's marks over the still person beside the chair, ``flag(k,
-    positions)`` the end-effectors taken for a person's in frame ``k``: the points near the
-    person and near the chair in each frame."""
+    positions)`` the end-effectors taken for a person's in frame ``k`` (``judged(k,
+    positions)``, optional: those whose frame could tell): the points near the person and
+    near the chair in each frame."""
     model, person, chair = BackgroundModel(), [], []
     for k in range(frames):
         est = estimate_frame(noisy(k, still_scene(chair=True)), params, background=model)
         pos = est.positions()
-        model.mark(pos, K, params.pixel_stride, flag(k, pos))
+        model.mark(pos, K, params.pixel_stride, flag(k, pos),
+                   judged=None if judged is None else judged(k, pos))
         person.append(points_near(est.points, PERSON_X, PERSON_Z))
         chair.append(points_near(est.points, CHAIR_X, CHAIR_Z))
     return person, chair
@@ -275,6 +282,35 @@ def test_an_entity_taken_for_a_person_in_a_few_frames_is_learnt_as_background():
     person, chair = _start_run(params, lambda k, pos: near(pos) & (k != 4))
     assert min(person) > 300
     assert max(chair[release + 1:]) == 0
+
+
+def test_frames_that_cannot_tell_a_person_do_not_count_against_them():
+    """A still person of whom most frames show too few end-effectors for the kinds to say
+    anything (``judged`` false there: two frames in three) stays when the frames that could
+    tell took them for a person, and the chair, never taken for one, goes; the same flags
+    counted in every frame lose the person."""
+    params = replace(PARAMS, background_keep_furniture=False, background_person_s=1.0)
+    release = 1 + int((params.background_learn_s + params.background_person_s) * 1e9 // SLOW_NS)
+    near = lambda pos: np.abs(pos[:, 0] - PERSON_X) < 0.4  # noqa: E731
+    flag = lambda k, pos: near(pos) & (k % 3 == 0)  # noqa: E731
+    person, chair = _start_run(params, flag,
+                               judged=lambda k, pos: np.full(len(pos), k % 3 == 0))
+    assert min(person) > 300
+    assert max(chair[release + 1:]) == 0
+    person, _ = _start_run(params, flag, judged=lambda k, pos: np.ones(len(pos), bool))
+    assert max(person[release + 1:]) == 0
+
+
+def test_an_entity_with_too_few_ends_is_not_judged():
+    """:func:`judged_candidates`: a flagged end is judged; an unflagged one only on an entity
+    with at least ``MIN_PERSON_ENDS`` ends."""
+    est = estimate_frame(noisy(0, still_scene(chair=True)), PARAMS)
+    entities = np.array([e.entity for e in est.entities for _ in e.candidates])
+    assert len(entities) >= 2
+    counts = {e: int(np.count_nonzero(entities == e)) for e in set(entities.tolist())}
+    none = judged_candidates(est, np.zeros(len(entities), bool))
+    assert none.tolist() == [counts[e] >= MIN_PERSON_ENDS for e in entities.tolist()]
+    assert judged_candidates(est, np.ones(len(entities), bool)).all()
 
 
 def test_furniture_joined_to_a_still_person_is_learnt_as_background():

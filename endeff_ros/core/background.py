@@ -776,7 +776,8 @@ class BackgroundModel:
 
     def mark(self, positions: npt.NDArray[np.float64], intrinsics: Intrinsics,
              stride: int, person: npt.ArrayLike | None = None,
-             person_points: npt.NDArray[np.float64] | None = None) -> None:
+             person_points: npt.NDArray[np.float64] | None = None,
+             judged: npt.ArrayLike | None = None) -> None:
         """While the background learns after the start or a reset (``background_keep_initial``),
         mark the components of the last frame holding end-effectors at ``positions`` (N, 3)
         metres, optical frame: they stay foreground for as long as they stay where they are
@@ -795,19 +796,25 @@ class BackgroundModel:
         the pixels they cover keep their marks, so furniture that the depth labelling joins
         to a still person (a shelf they stand beside) is learnt as background with the rest,
         certified static (:meth:`foreground` keeps certified pixels out of a component that
-        stays foreground)."""
+        stays foreground). ``judged`` (aligned with ``positions``; None: all): the
+        end-effectors whose frame could tell whether they are a person's; only their frames
+        count towards the share (:func:`.kinds.judged_candidates`: a caller without tracks
+        sees a still person with two ends in some frames, too few to tell them from a
+        lamp)."""
         if self.marking:
-            self._hits(positions, intrinsics, stride, person, person_points)
+            self._hits(positions, intrinsics, stride, person, person_points, judged)
 
     def _hits(self, positions: npt.NDArray[np.float64], intrinsics: Intrinsics, stride: int,
               person: npt.ArrayLike | None = None,
-              person_points: npt.NDArray[np.float64] | None = None
+              person_points: npt.NDArray[np.float64] | None = None,
+              judged: npt.ArrayLike | None = None
               ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.int64], npt.NDArray[np.int32]]:
         """Where ``positions`` project on the strided image (usable ones: ``ok``, their
         pixels ``uv``) and the component each lies on (``hit``, 0: none); the components hit
         restart their absorption clock and, while marking, the components of the positions
         flagged ``person`` (aligned with ``positions``; None: all) are marked, within the
-        pixels of ``person_points`` when given (:meth:`mark`)."""
+        pixels of ``person_points`` when given, in the frames the ``judged`` ones count for
+        (:meth:`mark`)."""
         labels = self._labels
         pts = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
         with np.errstate(divide='ignore', invalid='ignore'):
@@ -828,7 +835,13 @@ class BackgroundModel:
                     mark = held & (self._init_z == 0) & (self._last.depth > 0)
                     self._init_z[mark] = self._last.depth[mark]
                 if person is not None:
-                    self._init_seen[held & (self._init_z > 0)] += 1
+                    counted = held
+                    if judged is not None:
+                        told = np.asarray(judged, dtype=bool).reshape(-1)[ok]
+                        on_track[:] = False
+                        on_track[hit[(hit > 0) & told]] = True
+                        counted = np.take(on_track, labels)
+                    self._init_seen[counted & (self._init_z > 0)] += 1
                     flags = np.asarray(person, dtype=bool).reshape(-1)[ok]
                     on_track[:] = False
                     on_track[hit[(hit > 0) & flags]] = True
