@@ -142,7 +142,7 @@ def _background_estimate() -> EstimateFn:
             entities = [e.entity for e in estimate.entities for _ in e.candidates]
             model.mark(estimate.positions(), frame.intrinsics, params.pixel_stride, person,
                        person_points(estimate, entities, person),
-                       None if person is None else judged_candidates(estimate, person))
+                       None if person is None else judged_candidates(entities, person))
         return estimate
 
     return estimate

@@ -308,9 +308,9 @@ def test_an_entity_with_too_few_ends_is_not_judged():
     entities = np.array([e.entity for e in est.entities for _ in e.candidates])
     assert len(entities) >= 2
     counts = {e: int(np.count_nonzero(entities == e)) for e in set(entities.tolist())}
-    none = judged_candidates(est, np.zeros(len(entities), bool))
+    none = judged_candidates(entities, np.zeros(len(entities), bool))
     assert none.tolist() == [counts[e] >= MIN_PERSON_ENDS for e in entities.tolist()]
-    assert judged_candidates(est, np.ones(len(entities), bool)).all()
+    assert judged_candidates(entities, np.ones(len(entities), bool)).all()
 
 
 def test_furniture_joined_to_a_still_person_is_learnt_as_background():

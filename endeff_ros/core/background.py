@@ -308,6 +308,15 @@ def _windows(image: npt.NDArray, uv: npt.NDArray[np.int64]) -> npt.NDArray:
     return image[vv, uu].reshape(len(uv), len(offsets) ** 2)
 
 
+def _components_hit(labels: npt.NDArray[np.int32], n_labels: int,
+                    hit: npt.NDArray[np.int32]) -> npt.NDArray[np.bool_]:
+    """Per pixel, whether its component (``labels``, ``n_labels`` of them) is one of ``hit``
+    (0: none): a lookup table per label, faster than np.isin over the whole image."""
+    on = np.zeros(n_labels, dtype=bool)
+    on[hit[hit > 0]] = True
+    return np.take(on, labels)
+
+
 class BackgroundModel:
     """Per-pixel background depth of one camera view, learned online (module docstring).
 
@@ -825,27 +834,22 @@ class BackgroundModel:
         hit = (self._track_labels(labels, uv) if labels is not None
                else np.zeros(len(uv), np.int32))
         if hit.any() and labels is not None:
-            # A lookup table per label: faster than np.isin over the whole image.
-            on_track = np.zeros(int(labels.max()) + 1, dtype=bool)
-            on_track[hit[hit > 0]] = True
-            held = np.take(on_track, labels)
+            n_labels = int(labels.max()) + 1
+            held = _components_hit(labels, n_labels, hit)
             self._near_since[held] = self._t
             if self._marking and self._confirming and self._last is not None:
                 if self.learning:
                     mark = held & (self._init_z == 0) & (self._last.depth > 0)
                     self._init_z[mark] = self._last.depth[mark]
                 if person is not None:
-                    counted = held
                     if judged is not None:
                         told = np.asarray(judged, dtype=bool).reshape(-1)[ok]
-                        on_track[:] = False
-                        on_track[hit[(hit > 0) & told]] = True
-                        counted = np.take(on_track, labels)
+                        counted = _components_hit(labels, n_labels, hit[told])
+                    else:
+                        counted = held
                     self._init_seen[counted & (self._init_z > 0)] += 1
                     flags = np.asarray(person, dtype=bool).reshape(-1)[ok]
-                    on_track[:] = False
-                    on_track[hit[(hit > 0) & flags]] = True
-                    held = np.take(on_track, labels)
+                    held = _components_hit(labels, n_labels, hit[flags])
                     if person_points is not None:
                         held &= self._point_pixels(person_points, intrinsics, stride)
                     self._init_votes[held & (self._init_z > 0)] += 1

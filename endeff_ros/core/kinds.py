@@ -476,9 +476,10 @@ def person_candidates(estimate: FrameEstimate, intrinsics: Intrinsics | None = N
                          entities)], dtype=bool)
 
 
-def judged_candidates(estimate: FrameEstimate,
+def judged_candidates(entities: Sequence[int],
                       flags: Sequence[bool] | npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
-    """Per candidate of ``estimate`` (in :meth:`FrameEstimate.positions` order), given its
+    """Per candidate of a frame estimate (``entities``: each one's entity index, in
+    :meth:`FrameEstimate.positions` order, as for :func:`person_points`), given its
     :func:`person_candidates` ``flags``: whether this frame could tell if it is a person's.
     A flagged end is; an unflagged one only on an entity that shows at least
     :data:`MIN_PERSON_ENDS` ends: with fewer, the person tests fail whatever the entity is (a
@@ -486,11 +487,11 @@ def judged_candidates(estimate: FrameEstimate,
     a caller without tracks, whose kinds have no history (the tracker's tracks carry
     theirs): the static background counts only these frames
     (:meth:`.background.BackgroundModel.mark`)."""
-    entities = np.array([e.entity for e in estimate.entities for _ in e.candidates], np.intp)
     flags = np.asarray(flags, dtype=bool).reshape(-1)
-    if entities.size == 0:
+    if len(entities) == 0:
         return flags.copy()
-    _, inverse, counts = np.unique(entities, return_inverse=True, return_counts=True)
+    _, inverse, counts = np.unique(np.asarray(entities, np.intp), return_inverse=True,
+                                   return_counts=True)
     return flags | (counts[inverse] >= MIN_PERSON_ENDS)
 
 
