@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from tools import smoothing_replay
 
@@ -52,3 +53,24 @@ def test_main_scores_every_variant(room_bag, tmp_path, capsys):
     figures = json.loads(report.read_text())
     assert set(figures) == set(smoothing_replay.variants())
     assert 'largest difference to the published' in capsys.readouterr().out
+
+
+def test_jitter_is_split_by_how_far_the_truth_moved():
+    """A still end whose detection alternates 1 cm either side shows 20 mm of jitter in the
+    still bin; an end followed exactly while it moves shows none in its bin."""
+    n = 30
+    still = np.tile([0.0, 0.0, 2.0], (n, 1))
+    moving = np.stack([0.5 + 0.03 * np.arange(n), np.zeros(n), np.full(n, 2.0)], axis=1)
+    wobble = still + np.array([0.01, 0.0, 0.0]) * (-1.0) ** np.arange(n)[:, None]
+    frames = [(k, int(k * 1e9 / 30), np.array([0, 1]), np.stack([wobble[k], moving[k]]),
+               np.array([True, True]), np.stack([wobble[k], moving[k]]),
+               np.stack([still[k], moving[k]]), np.array([7, 8]), np.array(['hand', 'hand']),
+               np.array([k == 0, k == 0]), np.full((2, 3), np.nan)) for k in range(n)]
+    shown = [f[3] for f in frames]
+    split = smoothing_replay.jitter_by_truth_step(frames, shown)
+    assert split['0-5 mm'] == (n - 1, pytest.approx(0.02))
+    assert split['20-50 mm'] == (n - 1, pytest.approx(0.0))
+    assert split['5-20 mm'][0] == 0 and split['50+ mm'][0] == 0
+    # A gap in the recorded frames ends the pairs: no pair across it.
+    gapped = frames[:10] + [(k + 5, *f[1:]) for k, f in enumerate(frames[10:], start=10)]
+    assert smoothing_replay.jitter_by_truth_step(gapped, shown)['0-5 mm'][0] == n - 2

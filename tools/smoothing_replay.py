@@ -13,12 +13,15 @@ paper's recall and mean error.
     python -m tools.smoothing_replay score FILE.pkl [--json OUT]
 
 ``score`` replays the default One Euro filter first and checks that it gives the positions
-the tracker published (the replay is faithful), then the variants of :func:`variants`.
+the tracker published (the replay is faithful), then the variants of :func:`variants`, and
+splits the raw and the default filter's jitter by how far the truth moved
+(:func:`jitter_by_truth_step`).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import pickle
 import sys
 from collections.abc import Callable
@@ -187,6 +190,48 @@ def score(frames: list[Frame], shown: list[np.ndarray]) -> dict[str, float]:
             'accel_error_m': t['accel_error_m']}
 
 
+#: Upper bounds (m per frame) of the truth's step for :func:`jitter_by_truth_step`'s bins.
+TRUTH_STEP_BINS = (0.005, 0.02, 0.05, np.inf)
+
+
+def jitter_by_truth_step(frames: list[Frame], shown: list[np.ndarray],
+                         ) -> dict[str, tuple[int, float]]:
+    """Jitter (mean |e_t - e_{t-1}|, as :class:`TrackingScorer` has it) split by how far the
+    matched truth moved between the two frames: per bin of :data:`TRUTH_STEP_BINS`, the
+    number of pairs and their jitter (m; NaN without pairs). Whether the jitter comes with
+    still ends (the detection's noise, which a filter can take out) or with moving ones
+    (where a filter that follows the motion passes it). A pair: one published id matched to
+    one truth key in two consecutive recorded frames."""
+    steps: list[float] = []
+    jumps: list[float] = []
+    prev: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+    last_index = None
+    for (index, _, ids, _, flags, *_rest), pos in zip(frames, shown, strict=True):
+        gt, keys = _rest[1], _rest[2]
+        if gt is None or (last_index is not None and index != last_index + 1):
+            prev = {}
+        last_index = index
+        if gt is None:
+            continue
+        pub = ids[flags]
+        cur = {}
+        for e, g in score_frame(pos, gt).matches:
+            k = (int(pub[e]), int(keys[g]) if keys is not None else int(g))
+            cur[k] = (pos[e] - gt[g], gt[g])
+            if k in prev:
+                steps.append(float(np.linalg.norm(gt[g] - prev[k][1])))
+                jumps.append(float(np.linalg.norm(cur[k][0] - prev[k][0])))
+        prev = cur
+    st, ju = np.asarray(steps), np.asarray(jumps)
+    out, lo = {}, 0.0
+    for hi in TRUTH_STEP_BINS:
+        m = (st >= lo) & (st < hi)
+        name = f'{lo * 1e3:g}-{hi * 1e3:g} mm' if np.isfinite(hi) else f'{lo * 1e3:g}+ mm'
+        out[name] = (int(m.sum()), float(ju[m].mean()) if m.any() else math.nan)
+        lo = hi
+    return out
+
+
 def variants() -> dict[str, Step]:
     """The filters compared: none, the tracker's One Euro filter and its parameters moved one
     at a time, and constant-velocity Kalman filters."""
@@ -249,6 +294,17 @@ def main(argv: list[str] | None = None) -> int:
         print(f'{name:22s} recall {r["recall"]:.4f} fpr {r["fp_rate"]:.4f} '
               f'err {r["error_m"] * 100:.2f} cm jitter {r["jitter_m"] * 1e3:.1f} mm '
               f'acc {r["accel_error_m"] * 1e3:.1f} mm', flush=True)
+    for name in ('raw', 'one_euro_default'):
+        pairs: dict[str, list[tuple[int, float]]] = {}
+        for _, frames in runs:
+            for b, v in jitter_by_truth_step(frames, replay(frames, steps[name])).items():
+                pairs.setdefault(b, []).append(v)
+        split = {b: (sum(n for n, _ in v),
+                     sum(n * j for n, j in v if n) / max(sum(n for n, _ in v), 1))
+                 for b, v in pairs.items()}
+        report[name]['jitter_by_truth_step'] = split
+        print(f"{name:22s} jitter by the truth's step a frame: " + ', '.join(
+            f'{b} {j * 1e3:.1f} mm ({n} pairs)' for b, (n, j) in split.items()))
     if args.json:
         print_json(report, args.json)
     return 0
