@@ -18,7 +18,9 @@ Each cause counts per kind (head, hand, foot; ``other``); ``entity_changed`` cou
 switches whose B lies in another entity than A did at its last match, and ``gap`` the frames
 between the two matches (1: consecutive), as a histogram (1, 2-3, 4-9, 10+), overall and per
 cause; a duplicate's A is on its prediction or detected (``duplicate_*:old_predicted`` /
-``old_detected``). ``windows`` gives, per stretch of a bag's frames (:data:`WINDOWS`), its
+``old_detected``). ``births_beside_predicted`` counts, per distance, the tracks born beside
+a predicted one of their entity and who then holds its truth (:class:`BirthTally`).
+``windows`` gives, per stretch of a bag's frames (:data:`WINDOWS`), its
 switches and its end-effector minutes (labels at 30 Hz), and their ratio: whether switches
 come with a track's start or through the whole bag. A tally for the tracker's work, not a
 score.
@@ -47,6 +49,78 @@ GAPS = ((1, 1), (2, 3), (4, 9), (10, 10**9))
 WINDOWS = ((0, 10), (10, 30), (30, 10**9))
 
 
+#: A track born within this distance (m) of a track of its entity on its prediction is born
+#: beside it (:class:`BirthTally`); the tally's distance bins end at these bounds.
+BIRTH_BINS = (0.1, 0.2, 0.3, 0.5)
+#: Frames from a birth within which the truth the predicted track last matched must go to one
+#: of the two for an outcome (else ``none``).
+BIRTH_OUTCOME_FRAMES = 5
+
+
+def _birth_bin(distance: float) -> str:
+    lo = 0.0
+    for hi in BIRTH_BINS:
+        if distance < hi:
+            return f'{lo:g}-{hi:g} m'
+        lo = hi
+    return f'{lo:g}+ m'
+
+
+class BirthTally:
+    """New tracks born beside a track of their entity that is on its prediction, and who then
+    holds the truth the predicted track last matched: the new track (``B``), the predicted
+    one (``A``) or neither within :data:`BIRTH_OUTCOME_FRAMES` frames (``none``), per bin of
+    their distance at the birth. Whether a rule "a track born beside a prediction takes its
+    id" would remove the duplicates' switches or add as many: the evidence such a decision
+    needs, counted before it is made."""
+
+    def __init__(self) -> None:
+        self.counts: dict[str, dict[str, int]] = {}
+        self._previous: set[int] = set()
+        self._key_of: dict[int, int] = {}  # track id -> the truth key it last matched
+        self._pending: list[tuple[int, int, int, int, str]] = []
+
+    def births(self, index: int, states: list[Any]) -> None:
+        """The births of frame ``index``; ``states``: every track after the frame's update
+        (``id``, ``entity``, ``position``, ``detected``)."""
+        predicted = [t for t in states if t.id in self._previous and not t.detected
+                     and t.id in self._key_of]
+        for b in (t for t in states if t.id not in self._previous):
+            near = [(float(np.linalg.norm(np.asarray(a.position) - np.asarray(b.position))),
+                     a.id) for a in predicted if a.entity == b.entity]
+            if near:
+                distance, a = min(near)
+                if distance < BIRTH_BINS[-1]:
+                    self._pending.append((index, a, b.id, self._key_of[a],
+                                          _birth_bin(distance)))
+        self._previous = {t.id for t in states}
+
+    def matched(self, index: int, owner: dict[int, int]) -> None:
+        """The matches of frame ``index`` (after :meth:`births`): truth key -> track id."""
+        self._key_of.update({track: key for key, track in owner.items()})
+        waiting = []
+        for event in self._pending:
+            born, a, b, key, name = event
+            who = owner.get(key)
+            outcome = 'B' if who == b else 'A' if who == a else None
+            if outcome is None and index - born < BIRTH_OUTCOME_FRAMES - 1:
+                waiting.append(event)
+            else:
+                self._count(name, outcome or 'none')
+        self._pending = waiting
+
+    def close(self) -> dict[str, dict[str, int]]:
+        """The counts, births still waiting at the bag's end counted as ``none``."""
+        for *_, name in self._pending:
+            self._count(name, 'none')
+        self._pending = []
+        return self.counts
+
+    def _count(self, name: str, outcome: str) -> None:
+        c = self.counts.setdefault(name, {'A': 0, 'B': 0, 'none': 0})
+        c[outcome] += 1
+
+
 def _gap_name(gap: int) -> str:
     for lo, hi in GAPS:
         if lo <= gap <= hi:
@@ -70,7 +144,9 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
     why_dropped: dict[int, str] = {}
     windows = {_window(lo): {'switches': 0, 'labels': 0} for lo, _ in WINDOWS}
     matches = 0
+    births = BirthTally()
     for index, tracks, dropped, gt, keys, kinds, _ in tracked_frames(bag, tracker):
+        births.births(index, tracker._tracks)  # noqa: SLF001 - unpublished tracks too
         for track_id, why in dropped.items():
             why_dropped[track_id] = why
             born.pop(track_id, None)
@@ -83,6 +159,7 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
         score = score_frame(pos, gt)
         by_id = {t.id: t for t in tracks}
         matched_tracks = {tracks[e].id for e, _ in score.matches}
+        births.matched(index, {int(keys[g]): tracks[e].id for e, g in score.matches})
         for e, g in score.matches:
             key, track = int(keys[g]), tracks[e]
             matches += 1
@@ -112,7 +189,7 @@ def check_bag(bag: Path, params: EndeffParams | None = None) -> dict[str, Any]:
             if track.entity != entity:
                 detail['entity_changed'] = detail.get('entity_changed', 0) + 1
     return {'bag': bag.name, 'matches': matches, 'switches': counts, 'detail': detail,
-            'windows': windows}
+            'windows': windows, 'births_beside_predicted': births.close()}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -128,7 +205,14 @@ def main(argv: list[str] | None = None) -> int:
         minutes = sum(r['windows'][name]['labels'] for r in per_bag) / (30 * 60)
         windows[name] = {'switches': switches, 'end_effector_minutes': round(minutes, 3),
                          'per_minute': round(switches / minutes, 2) if minutes else None}
+    beside: dict[str, dict[str, int]] = {}
+    for r in per_bag:
+        for name, c in r['births_beside_predicted'].items():
+            total_c = beside.setdefault(name, {'A': 0, 'B': 0, 'none': 0})
+            for outcome, n in c.items():
+                total_c[outcome] += n
     print_json({'matches': sum(r['matches'] for r in per_bag),
+                'births_beside_predicted': dict(sorted(beside.items())),
                 'windows': windows,
                 'switches': {c: sum(total[k][c] for k in kinds) for c in CAUSES},
                 'per_kind': total,
