@@ -55,6 +55,8 @@ BIRTH_BINS = (0.1, 0.2, 0.3, 0.5)
 #: Frames from a birth within which the truth the predicted track last matched must go to one
 #: of the two for an outcome (else ``none``).
 BIRTH_OUTCOME_FRAMES = 5
+#: What :class:`BirthTally` counts: the new track holds the truth, the predicted one, neither.
+BIRTH_OUTCOMES = ('A', 'B', 'none')
 
 
 def _birth_bin(distance: float) -> str:
@@ -117,8 +119,7 @@ class BirthTally:
         return self.counts
 
     def _count(self, name: str, outcome: str) -> None:
-        c = self.counts.setdefault(name, {'A': 0, 'B': 0, 'none': 0})
-        c[outcome] += 1
+        self.counts.setdefault(name, dict.fromkeys(BIRTH_OUTCOMES, 0))[outcome] += 1
 
 
 def _gap_name(gap: int) -> str:
@@ -208,7 +209,7 @@ def main(argv: list[str] | None = None) -> int:
     beside: dict[str, dict[str, int]] = {}
     for r in per_bag:
         for name, c in r['births_beside_predicted'].items():
-            total_c = beside.setdefault(name, {'A': 0, 'B': 0, 'none': 0})
+            total_c = beside.setdefault(name, dict.fromkeys(BIRTH_OUTCOMES, 0))
             for outcome, n in c.items():
                 total_c[outcome] += n
     print_json({'matches': sum(r['matches'] for r in per_bag),

@@ -192,6 +192,8 @@ def score(frames: list[Frame], shown: list[np.ndarray]) -> dict[str, float]:
 
 #: Upper bounds (m per frame) of the truth's step for :func:`jitter_by_truth_step`'s bins.
 TRUTH_STEP_BINS = (0.005, 0.02, 0.05, np.inf)
+#: The variants whose jitter ``score`` splits by the truth's step: unfiltered and the default.
+SPLIT_VARIANTS = ('raw', 'one_euro_default')
 
 
 def jitter_by_truth_step(frames: list[Frame], shown: list[np.ndarray],
@@ -206,8 +208,7 @@ def jitter_by_truth_step(frames: list[Frame], shown: list[np.ndarray],
     jumps: list[float] = []
     prev: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
     last_index = None
-    for (index, _, ids, _, flags, *_rest), pos in zip(frames, shown, strict=True):
-        gt, keys = _rest[1], _rest[2]
+    for (index, _, ids, _, flags, _, gt, keys, *_), pos in zip(frames, shown, strict=True):
         if gt is None or (last_index is not None and index != last_index + 1):
             prev = {}
         last_index = index
@@ -288,21 +289,24 @@ def main(argv: list[str] | None = None) -> int:
                                 strict=True))
     print(f'replay of the default filter: largest difference to the published {worst:.2e} m')
     report = {}
+    splits: dict[str, dict[str, tuple[int, float]]] = {}
     for name, step in steps.items():
-        report[name] = _mean([score(frames, replay(frames, step)) for _, frames in runs])
+        shown = [replay(frames, step) for _, frames in runs]
+        report[name] = _mean([score(frames, s) for (_, frames), s in zip(runs, shown)])
         r = report[name]
         print(f'{name:22s} recall {r["recall"]:.4f} fpr {r["fp_rate"]:.4f} '
               f'err {r["error_m"] * 100:.2f} cm jitter {r["jitter_m"] * 1e3:.1f} mm '
               f'acc {r["accel_error_m"] * 1e3:.1f} mm', flush=True)
-    for name in ('raw', 'one_euro_default'):
-        pairs: dict[str, list[tuple[int, float]]] = {}
-        for _, frames in runs:
-            for b, v in jitter_by_truth_step(frames, replay(frames, steps[name])).items():
-                pairs.setdefault(b, []).append(v)
-        split = {b: (sum(n for n, _ in v),
-                     sum(n * j for n, j in v if n) / max(sum(n for n, _ in v), 1))
-                 for b, v in pairs.items()}
-        report[name]['jitter_by_truth_step'] = split
+        if name in SPLIT_VARIANTS:
+            pairs: dict[str, list[tuple[int, float]]] = {}
+            for (_, frames), s in zip(runs, shown):
+                for b, v in jitter_by_truth_step(frames, s).items():
+                    pairs.setdefault(b, []).append(v)
+            splits[name] = report[name]['jitter_by_truth_step'] = {
+                b: (sum(n for n, _ in v),
+                    sum(n * j for n, j in v if n) / max(sum(n for n, _ in v), 1))
+                for b, v in pairs.items()}
+    for name, split in splits.items():
         print(f"{name:22s} jitter by the truth's step a frame: " + ', '.join(
             f'{b} {j * 1e3:.1f} mm ({n} pairs)' for b, (n, j) in split.items()))
     if args.json:
