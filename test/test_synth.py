@@ -385,3 +385,37 @@ def test_contact_sheet(bag_dir, tmp_path):
     assert img is not None and img.shape[0] > 100 and img.shape[1] > 300
     assert img.std() > 10
     assert synth_sheet.find_bags([bag_dir]) and len(synth_sheet.find_bags([bag_dir])) == 11
+
+
+def test_a_bag_appears_only_once_complete(bag_dir: Path, tmp_path: Path) -> None:
+    """An interrupted write leaves neither a short bag under the bag's name nor a hidden
+    partial one, and the bag of an earlier run stays; a partial directory left by a killed
+    process is not taken for a bag and is swept by the next write."""
+    from endeff_ros.bag.outputs import partial_dir
+    from endeff_ros.bag.reader import find_bags
+    from endeff_ros.synth.writer import write_bags
+
+    name = 'star'
+    path = tmp_path / 'mcap' / name
+    first = synth_cli.generate_one(name, tmp_path, ['mcap'], True, 0)
+    before = sorted((p.name, p.stat().st_size) for p in path.iterdir())
+
+    def interrupted():
+        for i, frame in enumerate(render_sequence(name, quick=True, seed=0)):
+            if i == 4:
+                raise KeyboardInterrupt
+            yield frame
+
+    with pytest.raises(KeyboardInterrupt):
+        write_bags(interrupted(), SPECS[name], {'mcap': path})
+    assert sorted((p.name, p.stat().st_size) for p in path.iterdir()) == before
+    assert [p.name for p in path.parent.iterdir()] == [name]
+
+    stale = partial_dir(path, pid=2**22 + 1)  # beyond any pid in use
+    (stale / 'x').mkdir(parents=True)
+    (stale / 'x' / 'short_0.mcap').write_bytes(b'')
+    assert find_bags([tmp_path]) == [path]
+    assert synth_cli.generate_one(name, tmp_path, ['mcap'], True, 0) == first
+    assert [p.name for p in path.parent.iterdir()] == [name]
+    assert (path / f'{name}.mcap').read_bytes() == (
+        bag_dir / 'mcap' / name / f'{name}.mcap').read_bytes()

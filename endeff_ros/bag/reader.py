@@ -218,6 +218,8 @@ def find_bags(paths: Iterable[str | Path]) -> list[Path]:
 def _search(root: Path) -> list[Path]:
     found: list[Path] = []
     for child in sorted(root.iterdir()):
+        if child.name.startswith('.'):  # hidden: outputs being written (bag.outputs.partial_dir)
+            continue
         if child.is_dir():
             found.extend([child] if is_bag(child) else _search(child))
         elif child.suffix in BAG_SUFFIXES:

@@ -9,9 +9,9 @@ capture clips with attributes, ``synth/suite.py``) and ``rooms`` (the same clips
 pairs, empty and furnished room, and camera pans, ``synth/rooms_suite.py``). For the last two
 ``--only`` takes glob patterns of bag names and ``--list`` prints the specs without rendering.
 
-A bag whose writing fails or is interrupted (Ctrl-C, SIGTERM: the workers unwind, see
-:mod:`endeff_ros.workers`) is removed, so that every bag left in ``OUT`` is complete; a bag of
-an earlier run that the job had not yet replaced stays.
+Every bag is written aside and moved into place once complete (``synth/writer.py``), so that
+every bag in ``OUT`` is complete whatever ends a worker (an error, Ctrl-C, SIGTERM, SIGKILL);
+a bag of an earlier run stays until its replacement is complete.
 """
 
 from __future__ import annotations
@@ -20,12 +20,9 @@ import argparse
 import fnmatch
 import json
 import os
-import shutil
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 from endeff_ros.bag.outputs import check_output_option
 from endeff_ros.cli_common import EXIT_SIGINT, EXIT_SIGTERM, Terminated, positive_int
@@ -88,26 +85,7 @@ def generate_one(name: str, out: Path, storages: list[str], quick: bool, seed: i
     from .writer import write_bags
 
     paths = {s: Path(out) / s / name for s in storages}
-    return _unfinished_removed(list(paths.values()), lambda: write_bags(
-        render_sequence(name, quick=quick, seed=seed), SPECS[name], paths, seed))
-
-
-def _unfinished_removed(paths: list[Path], write: Callable[[], Any]) -> Any:
-    """``write()``, which (re)writes the bags at ``paths``; if it raises (an error, an
-    interrupt), the bags it had begun are removed before the exception goes on: rosbags
-    closes a writer left by an exception as a complete-looking bag. A bag of an earlier run
-    that it had not yet replaced (same directory, same inode) stays."""
-    before = {p: p.stat().st_ino for p in paths if p.exists()}
-    try:
-        return write()
-    except BaseException:
-        for p in paths:
-            try:
-                if p.stat().st_ino != before.get(p):
-                    shutil.rmtree(p, ignore_errors=True)
-            except OSError:  # never begun
-                pass
-        raise
+    return write_bags(render_sequence(name, quick=quick, seed=seed), SPECS[name], paths, seed)
 
 
 def generate(out: Path, names: list[str], storages: list[str], *, quick: bool = False,
@@ -158,8 +136,7 @@ def select_specs(specs: list, only: str, suite: str = 'mocap') -> list:
 def _mocap_one(spec, clips: dict, out: Path, storages: list[str]) -> dict:
     from .suite import write_bag
 
-    paths = [Path(out) / s / spec.name for s in storages]
-    return _unfinished_removed(paths, lambda: write_bag(spec, clips, out, storages))
+    return write_bag(spec, clips, out, storages)
 
 
 def _suite_specs(args: argparse.Namespace, clips: list) -> list:

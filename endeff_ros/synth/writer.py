@@ -15,6 +15,7 @@ import numpy.typing as npt
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from ..bag.outputs import partial_dir, remove, sweep_stale_partials
 from ..core.types import Intrinsics
 from .frames import SynthFrame
 from .sensor import depth_to_mm
@@ -119,22 +120,49 @@ def write_bags(frames: Iterable[SynthFrame], spec: SequenceSpec, paths: dict[str
     ``custom_data`` is called once all frames are written (so it may describe them) and its
     string pairs go into the rosbag2 metadata's ``custom_data``. ``compress`` zstd-compresses
     the chunks of ``mcap`` bags (rosbag2's storage compression, read transparently by rosbags
-    and ros2 bag; depth shrinks about 5x, noisy colour 1.2x). Existing bag directories are
-    replaced. Returns the number of frames written.
-    """
-    import shutil
+    and ros2 bag; depth shrinks about 5x, noisy colour 1.2x). Returns the number of frames
+    written.
 
+    Each bag is written in a hidden sibling directory (:func:`~endeff_ros.bag.outputs.partial_dir`)
+    and moved to its path, replacing a bag there, only once complete: rosbags closes a writer
+    left by an exception as a complete-looking bag with fewer frames, and a worker killed
+    before it could remove one (SIGKILL, the end of its grace period) would leave it under the
+    bag's own name. An interrupted write removes its directories; one left by a killed process
+    is hidden from bag searches and swept by the next write of that bag.
+    """
+    final = {storage: Path(path) for storage, path in paths.items()}
+    aside: dict[str, Path] = {}
     writers = []
-    for storage, path in paths.items():
-        path = Path(path)
-        if path.exists():
-            shutil.rmtree(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        w = Writer(path, version=9, storage_plugin=STORAGES[storage])
-        if compress and storage == 'mcap':
-            w.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
-        w.open()
-        writers.append(w)
+    try:
+        for storage, path in final.items():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            sweep_stale_partials(path)
+            aside[storage] = partial_dir(path)
+            remove(aside[storage])
+            aside[storage].mkdir()
+            # Inside it under the bag's own name: rosbags names the storage file after it.
+            w = Writer(aside[storage] / path.name, version=9, storage_plugin=STORAGES[storage])
+            if compress and storage == 'mcap':
+                w.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+            w.open()
+            writers.append(w)
+        count = _write_frames(writers, frames, spec, seed, custom_data)
+        for storage, path in final.items():
+            old = aside[storage] / f'{path.name}.old'
+            if path.exists():
+                path.rename(old)
+            (aside[storage] / path.name).rename(path)
+            remove(aside[storage])
+    except BaseException:
+        for path in aside.values():
+            remove(path)
+        raise
+    return count
+
+
+def _write_frames(writers: list[Writer], frames: Iterable[SynthFrame], spec: SequenceSpec,
+                  seed: int, custom_data: Callable[[], dict[str, str]] | None) -> int:
+    """Write ``frames`` through the open ``writers`` and close them; returns the count."""
     try:
         conns = [{} for _ in writers]
         topics = ((DEPTH_TOPIC, 'sensor_msgs/msg/Image'), (COLOR_TOPIC, 'sensor_msgs/msg/Image'),
