@@ -196,6 +196,7 @@ def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
                        loop_sides: list[bool] | None = None, scale_length: float = 0.0,
                        scale_min: float = 1.0, tip_depth: float = 0.0,
                        min_tip_points: int = 0, extremes: list[int] | None = None,
+                       floor_geodesic: float = 0.0, verdicts: list[bool] | None = None,
                        ) -> list[tuple[int, npt.NDArray[np.intp], float]]:
     """Iterated Dijkstra with zero-weight edges along each found path (Baak et al.).
 
@@ -231,6 +232,12 @@ def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
     ``extremes``: a list that receives, per end-effector returned, its extreme (the node
     itself unless a sliver moved it); None: not asked.
 
+    Over-generation (for the candidate scorer, :mod:`.candidates`): with ``floor_geodesic``
+    > 0 the iteration goes on where the thresholds above stop it, taking the farthest node
+    as long as it protrudes ``floor_geodesic`` or more, and ``verdicts`` (a list) receives
+    per end-effector returned whether the thresholds alone would have returned it (found
+    before they stopped the iteration). Those found first are the same either way.
+
     Relative thresholds: once the first (farthest) end is found, its geodesic distance L
     measures the entity; below ``scale_length`` g and the chain threshold shrink by
     L / ``scale_length``, to ``scale_min`` of their values at least. Why: g in metres suits one
@@ -247,17 +254,22 @@ def find_end_effectors(graph: TopologyGraph, root: int, *, min_geodesic: float,
     low = min_geodesic if chain_geodesic is None else min(chain_geodesic, min_geodesic)
     sources = [root]
     found: list[tuple[int, npt.NDArray[np.intp], float]] = []
+    stopped = False  # the thresholds would have ended the iteration
     while len(found) < max_count:
         dist, pred = graph.shortest_paths(sources)
         dist = np.where(np.isfinite(dist), dist, -1.0)
         node = int(np.argmax(dist))
-        if dist[node] < low:
+        if not stopped and dist[node] < low:
+            stopped = True
+        elif not stopped and dist[node] < min_geodesic:
+            chain = _farthest_chain(graph, root, dist, pred, low, chain_subbands,
+                                    chain_min_points)
+            stopped = chain < 0
+            node = node if stopped else chain
+        if stopped and (floor_geodesic <= 0 or dist[node] < floor_geodesic):
             break
-        if dist[node] < min_geodesic:
-            node = _farthest_chain(graph, root, dist, pred, low, chain_subbands,
-                                   chain_min_points)
-            if node < 0:
-                break
+        if verdicts is not None:
+            verdicts.append(not stopped)
         extreme = node
         if min_tip_points > 0:
             node = _solid_tip(graph, extreme, dist, pred, tip_depth, min_tip_points)

@@ -18,6 +18,7 @@ from .bands import (
     expand_bands,
     split_subbands,
 )
+from .candidates import select_candidates
 from .cloud import foreground_cloud
 from .floor import FloorPlane
 from .graph import TopologyGraph, approximate_geodesic, build_graph, find_end_effectors, geodesic
@@ -29,6 +30,7 @@ if TYPE_CHECKING:
     import numpy.typing as npt
 
     from .background import BackgroundModel
+    from .candidates import Scored
 
 
 @dataclass(frozen=True)
@@ -66,6 +68,9 @@ class FrameEstimate:
     floor: FloorPlane | None = None
     stage_ms: dict[str, float] = field(default_factory=dict)
     cut: npt.NDArray[np.bool_] | None = None
+    #: With ``candidate_floor``: every over-generated candidate before the selection
+    #: (:class:`.candidates.Scored`); None otherwise.
+    scored: Scored | None = None
 
     def positions(self) -> npt.NDArray[np.float64]:
         """(M, 3) positions of all candidates of all entities."""
@@ -103,6 +108,8 @@ def estimate_frame(frame: RGBDFrame, params: EndeffParams | None = None, *,
                      fit_edges(strided_read(frame.depth, params.pixel_stride),
                                params.pixel_stride, params.cut_margin_px))
         estimate = drop_cut_ends(estimate, frame.intrinsics, params, edges)
+    if params.candidate_floor > 0:
+        estimate = select_candidates(estimate, frame.intrinsics, params)
     return estimate
 
 
@@ -137,7 +144,8 @@ def cut_nodes(points: npt.NDArray[np.float64], subband: npt.NDArray[np.intp],
 def drop_cut_ends(estimate: FrameEstimate, intrinsics: Intrinsics,
                   params: EndeffParams, edges: Edges | None = None) -> FrameEstimate:
     """``estimate`` without the candidates whose sub-band is cut (:func:`cut_nodes`, with
-    the points its ``cut`` marks and the readable area's ``edges``)."""
+    the points its ``cut`` marks and the readable area's ``edges``); when candidates are
+    over-generated (``candidate_floor``) they are marked ``cut`` instead, for the scorer."""
     cut = cut_nodes(estimate.points, estimate.subband, intrinsics, params, estimate.cut,
                     edges)
     if not cut.size or not any(e.candidates for e in estimate.entities):
@@ -145,6 +153,11 @@ def drop_cut_ends(estimate: FrameEstimate, intrinsics: Intrinsics,
     def is_cut(c: Candidate) -> bool:  # its node, or the sliver it was moved back from
         return bool(np.isin([c.node, c.node if c.extreme is None else c.extreme], cut).any())
 
+    if params.candidate_floor > 0:
+        entities = [dataclasses.replace(e, candidates=[
+            dataclasses.replace(c, cut=True, thresholds=False) if is_cut(c) else c
+            for c in e.candidates]) for e in estimate.entities]
+        return dataclasses.replace(estimate, entities=entities)
     entities = [dataclasses.replace(e, candidates=[c for c in e.candidates if not is_cut(c)])
                 for e in estimate.entities]
     return dataclasses.replace(estimate, entities=entities)
@@ -194,7 +207,10 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
     # Per found extreme: on the far side of a loop (asked only with loop_far_sides).
     sides: list[bool] | None = [] if params.loop_far_sides else None
     extremes: list[int] = []  # per end-effector, its extreme (the node unless a sliver)
+    verdicts: list[bool] = []  # per end-effector, whether g and the chain rule return it
+    orders: list[int] = []  # per end-effector, its rank in its entity
     for e, seed in enumerate(seeds):
+        before = len(found)
         root_node = int(subband[seed])
         found += [(e, *f) for f in find_end_effectors(graph, root_node,
                                                        min_geodesic=params.min_geodesic,
@@ -207,22 +223,28 @@ def estimate_points(points: npt.NDArray[np.float64], params: EndeffParams | None
                                                        scale_min=params.scale_min,
                                                        tip_depth=params.tip_depth,
                                                        min_tip_points=params.min_tip_points,
-                                                       extremes=extremes)]
+                                                       extremes=extremes,
+                                                       floor_geodesic=params.candidate_floor,
+                                                       verdicts=verdicts)]
+        orders += range(len(found) - before)
     dist_root = [graph.dist[subband[seeds[e]], path] for e, _, path, _ in found]
     positions, shifts, widths = _tip_positions(points, subband, graph, [f[2] for f in found],
                                                dist_root, params)
     candidates: list[list[Candidate]] = [[] for _ in seeds]
     loop_sides: list[list[Candidate]] = [[] for _ in seeds]
-    for (e, node, path, protrusion), side, extreme, position, shift, width in zip(
-            found, sides or [False] * len(found), extremes, positions, shifts, widths):
-        if _broad_corner(protrusion, width, params):
-            continue
+    for (e, node, path, protrusion), side, extreme, position, shift, width, verdict, order in zip(
+            found, sides or [False] * len(found), extremes, positions, shifts, widths, verdicts,
+            orders):
+        broad = _broad_corner(protrusion, width, params)
+        if broad and params.candidate_floor <= 0 or side and (broad or not verdict):
+            continue  # (over-generated far sides of loops are not kept for the tracks)
         root = points[seeds[e]]
         (loop_sides if side else candidates)[e].append(Candidate(
             position=position, node=node, geodesic=geodesic(graph, path),
             geodesic_approx=approximate_geodesic(position - shift, graph, path, root),
             path=graph.centroids[path], protrusion=protrusion, centre_shift=shift,
-            extreme=None if extreme == node else extreme))
+            extreme=None if extreme == node else extreme, width=float(width), order=order,
+            thresholds=verdict and not broad, broad=broad))
     entities = [EntityEstimate(entity=e, root=points[seed], candidates=candidates[e],
                                graph=graph, point_index=np.flatnonzero(entity == e),
                                root_node=int(subband[seed]), loop_sides=loop_sides[e])

@@ -137,6 +137,13 @@ class Candidate:
     head, up to one part radius for a long one such as a hand. ``extreme`` is the graph node
     the path ended at when that was a sliver and ``node`` lies back along the path (None: the
     node itself); a cut there cuts the candidate too.
+
+    For the candidate scorer (:mod:`.candidates`): ``width`` is the terminal part's visible
+    width across its axis (NaN: no axis), ``order`` the rank in which the iterated Dijkstra
+    found it in its entity, ``thresholds`` whether the thresholds of Section 4 alone keep it
+    (g or the chain rule, not a broad corner, not cut by the view), ``broad`` and ``cut``
+    those two verdicts, and ``score`` the scorer's chance that it is an end-effector (NaN:
+    not scored).
     """
 
     position: npt.NDArray[np.float64]
@@ -147,6 +154,12 @@ class Candidate:
     protrusion: float = 0.0
     centre_shift: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     extreme: int | None = None
+    width: float = float('nan')
+    order: int = 0
+    thresholds: bool = True
+    broad: bool = False
+    cut: bool = False
+    score: float = float('nan')
 
     @property
     def end_centre(self) -> npt.NDArray[np.float64]:
