@@ -21,7 +21,9 @@ from endeff_ros.core.single_frame import estimate_frame
 from endeff_ros.synth import scenes
 
 COL = {n: i for i, n in enumerate(FEATURES)}
-OVER = EndeffParams(candidate_floor=0.04)  # low, so that clean scenes over-generate too
+#: Over-generation with the thresholds deciding; low, so that clean scenes over-generate too.
+OVER = EndeffParams(candidate_floor=0.04, candidate_scorer=False)
+ALONE = EndeffParams(candidate_floor=0.0)  # the thresholds of Section 4 alone
 
 
 @functools.cache
@@ -35,7 +37,7 @@ def _shot(kind: str):
 @pytest.mark.parametrize('kind', ['person', 'arms_down'])
 def test_over_generation_with_the_thresholds_deciding_changes_no_candidate(kind: str) -> None:
     frame = _shot(kind).frame
-    alone = estimate_frame(frame, EndeffParams())
+    alone = estimate_frame(frame, ALONE)
     over = estimate_frame(frame, OVER)
     assert alone.scored is None
     np.testing.assert_array_equal(over.positions(), alone.positions())
@@ -98,3 +100,31 @@ def test_the_committed_model_reads_and_scores_every_feature() -> None:
         CandidateModel.from_json({'bias': 0.0, 'features': [
             {'name': 'no such feature', 'edges': [], 'weights': [0.0]}]})
 
+
+
+def test_train_candidates_collects_every_candidate_and_fits_a_model(tmp_path) -> None:
+    """``tools.train_candidates collect`` on a quick bag: one row per over-generated candidate
+    of each annotated frame, right where the frame's matching of all of them made it a true
+    positive, the thresholds' verdict beside it; ``fit`` writes a model that loads and whose
+    report compares it with the thresholds."""
+    import json
+
+    from endeff_ros.synth import cli as synth_cli
+    from tools.train_candidates import load, main
+
+    synth_cli.generate_one('punching', tmp_path, ['mcap'], True, 0)
+    assert main(['collect', str(tmp_path / 'mcap'), '--out', str(tmp_path / 'c')]) == 0
+    (bag,) = load([tmp_path / 'c'])
+    assert len(bag['features']) == len(bag['right']) == len(bag['kept']) == len(
+        bag['positions']) > 0
+    assert bag['features'].shape[1] == len(FEATURES)
+    assert 0 < bag['right'].sum() < len(bag['right'])  # premise: right and wrong candidates
+    assert (bag['features'][:, COL['thresholds']] > 0.5).tolist() == bag['kept'].tolist()
+    assert len(bag['gt']) == len(bag['gt_frame']) and bag['frames'] > 0
+    model = tmp_path / 'm.json'
+    assert main(['fit', str(tmp_path / 'c'), '--model', str(model), '--json',
+                 str(tmp_path / 'r.json')]) == 0
+    assert set(CandidateModel.load(model).names) == set(FEATURES)
+    report = json.loads((tmp_path / 'r.json').read_text(encoding='utf-8'))
+    assert report['candidates'] == len(bag['right'])
+    assert report['operating_points'][0]['keep'] == 'thresholds'

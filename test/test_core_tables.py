@@ -129,7 +129,9 @@ def test_a_body_the_table_hides_ends_there_as_a_cut() -> None:
     assert np.count_nonzero(cloud_.cut & (np.abs(heights - 0.8) < 0.1)) > 10  # over the top
     assert not np.any(cloud_.cut & (heights > 1.1))  # chest, arms, head
     ends = []
-    for params in (PARAMS, PARAMS.replace(drop_cut_ends=False)):
+    # The cut's own verdict, the thresholds alone (the candidate scorer weighs it as evidence).
+    rules = PARAMS.replace(candidate_floor=0.0)
+    for params in (rules, rules.replace(drop_cut_ends=False)):
         pos = estimate_frame(s.frame, params).positions()
         false = np.linalg.norm(pos[:, None] - s.gt[None], axis=2).min(axis=1) > 0.15
         ends.append(int(np.count_nonzero(false & (scene(pos)[:, 1] > 0.15))))  # off the floor

@@ -16,8 +16,9 @@ matching of *all* candidates (0.15 m, as ``endeff eval``) made it right, the thr
 verdict; per frame its ground truth. ``fit`` fits the additive logistic model
 (:func:`tools.additive_fit.fit`) and writes it (default the committed
 ``endeff_ros/core/candidate_model.json``); ``--holdout`` fits on the bags of half the clips
-and reports on the others, both ways. Reports: per ``min_candidate_score`` the recall and
-FPR (means over bags, each frame matched again over the kept candidates, as ``endeff eval``
+and reports on the others, both ways. Reports: per pair of ``drop_candidate_score`` and
+``min_candidate_score`` (:data:`RULES`) the recall and FPR (means over the bags of people and
+over the others', each frame matched again over the kept candidates, as ``endeff eval``
 would), against the thresholds' own.
 """
 
@@ -43,7 +44,10 @@ FLOOR = 0.12
 BINS = 8
 PENALTY = 30.0
 RIDGE = 1.0
-THRESHOLDS = (0.2, 0.3, 0.35, 0.4, 0.45, 0.5, 0.55, 0.6, 0.7)
+RULES = tuple((drop, least) for drop in (0.1, 0.15, 0.2) for least in (0.3, 0.4, 0.5)) + (
+    (0.4, 0.4),)
+"""(``drop_candidate_score``, ``min_candidate_score``) pairs the reports show; (0.4, 0.4):
+the score alone."""
 
 
 def collect_bag(bag: Path, params: EndeffParams | None = None, *, out: Path) -> str:
@@ -133,21 +137,27 @@ def bag_score(bag: dict[str, Any], keep: np.ndarray) -> tuple[float, float]:
 
 
 def operating_points(bags: list[dict[str, Any]], model: CandidateModel) -> list[dict[str, Any]]:
-    """The thresholds' recall and FPR, then per ``min_candidate_score`` the model's (means
-    over bags, and per room)."""
+    """The thresholds' recall and FPR, then per pair of :data:`RULES` the model's (means over
+    the bags of people, and over the other entities' bags: the paper suite's)."""
     scores = [model(b['features']) for b in bags]
+    people = np.array([b['attributes'].get('room') is not None for b in bags])
     rows = []
     for label, keeps in [('thresholds', [b['kept'] for b in bags])] + [
-            (t, [s >= t for s in scores]) for t in THRESHOLDS]:
+            (f'drop {drop} / min {least}',
+             [np.where(b['kept'], s >= drop, s >= least) for b, s in zip(bags, scores,
+                                                                          strict=True)])
+            for drop, least in RULES]:
         per = np.array([bag_score(b, k) for b, k in zip(bags, keeps, strict=True)])
-        row: dict[str, Any] = {'keep': label, 'recall': round(float(np.nanmean(per[:, 0])), 4),
-                               'fpr': round(float(np.mean(per[:, 1])), 4)}
-        for key in ('room', 'motion'):
-            values = [str(b['attributes'].get(key)) for b in bags]
-            for v in sorted(set(values)):
-                sel = np.array([x == v for x in values])
-                row[f'{key}={v}'] = (round(float(np.nanmean(per[sel, 0])), 3),
-                                     round(float(np.mean(per[sel, 1])), 3))
+        row: dict[str, Any] = {'keep': label}
+        for name, sel in (('people', people), ('other entities', ~people)):
+            if sel.any():
+                row[name] = (round(float(np.nanmean(per[sel, 0])), 3),
+                             round(float(np.mean(per[sel, 1])), 3))
+        for v in ('empty', 'wall', 'furnished'):
+            sel = np.array([b['attributes'].get('room') == v for b in bags])
+            if sel.any():
+                row[f'room={v}'] = (round(float(np.nanmean(per[sel, 0])), 3),
+                                    round(float(np.mean(per[sel, 1])), 3))
         rows.append(row)
     return rows
 

@@ -32,8 +32,9 @@ over-generation alone changes no output (the training tool collects the evidence
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import numpy as np
 
@@ -42,9 +43,23 @@ from .additive import AdditiveModel, read_model
 if TYPE_CHECKING:
     import numpy.typing as npt
 
+    from .floor import FloorPlane
     from .params import EndeffParams
-    from .single_frame import FrameEstimate
     from .types import Intrinsics
+
+
+class FrameEstimate(Protocol):
+    """What this module reads of a :class:`~.single_frame.FrameEstimate` (which imports
+    this module, so it is described here rather than imported)."""
+
+    points: npt.NDArray[np.float64]
+    entities: Sequence[Any]
+    floor: FloorPlane | None
+
+    def positions(self) -> npt.NDArray[np.float64]: ...
+
+
+E = TypeVar('E', bound=FrameEstimate)
 
 MODEL_FILE = Path(__file__).with_name('candidate_model.json')
 """The committed model (``tools/train_candidates.py`` writes it)."""
@@ -156,8 +171,7 @@ def candidate_features(estimate: FrameEstimate,
     return out
 
 
-def select_candidates(estimate: FrameEstimate, intrinsics: Intrinsics,
-                      params: EndeffParams) -> FrameEstimate:
+def select_candidates(estimate: E, intrinsics: Intrinsics, params: EndeffParams) -> E:
     """``estimate`` with only the candidates kept, each with its score (NaN without the
     scorer). With ``candidate_scorer``, by the committed model's score: a candidate the
     thresholds keep stays unless it scores below ``drop_candidate_score``, any other needs
@@ -184,7 +198,7 @@ def select_candidates(estimate: FrameEstimate, intrinsics: Intrinsics,
             dataclasses.replace(c, score=float(s))
             for c, s, k in zip(e.candidates, score[of], keep[of], strict=True) if k]))
         start += len(e.candidates)
-    return dataclasses.replace(estimate, entities=entities, scored=Scored(
+    return dataclasses.replace(estimate, entities=entities, scored=Scored(  # type: ignore[type-var]
         features, estimate.positions(), keep))
 
 

@@ -201,13 +201,13 @@ class EndeffParams:
                                'across its axis); a shorter, broader extreme is the corner of '
                                'a broad surface (a shoulder in a coat, a hip, a box) and is '
                                'dropped; 0 = off.', lo=0.0, hi=20.0)
-    candidate_floor: float = _p(0.0, 'Over-generate: the iterated Dijkstra goes on past g and '
+    candidate_floor: float = _p(0.12, 'Over-generate: the iterated Dijkstra goes on past g and '
                                 'the chain rule down to extremes that protrude this much, and '
                                 'broad corners and cut ends are kept, each marked with the '
                                 "thresholds' verdict, for the candidate scorer "
                                 '(core/candidates.py); 0 = off: the thresholds decide alone.',
                                 unit='m', lo=0.0, hi=10.0)
-    candidate_scorer: bool = _p(False, 'With candidate_floor > 0: keep the candidates that the '
+    candidate_scorer: bool = _p(True, 'With candidate_floor > 0: keep the candidates that the '
                                 "committed model (core/candidate_model.json) gives at least "
                                 "min_candidate_score; off: the thresholds' verdicts.")
     min_candidate_score: float = _p(0.4, 'Candidate scorer: the least chance of being an '
