@@ -11,11 +11,11 @@ import pytest
 
 from endeff_ros.core.candidates import (
     FEATURES,
-    NO_FLOOR,
     CandidateModel,
     candidate_features,
     committed_model,
 )
+from endeff_ros.core.confidence import NO_FLOOR
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.core.single_frame import estimate_frame
 from endeff_ros.synth import scenes

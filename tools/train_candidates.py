@@ -33,7 +33,8 @@ import numpy as np
 
 from endeff_ros.attributes import custom_data, parse_attributes
 from endeff_ros.bag.reader import BagReader
-from endeff_ros.core.candidates import BINARY, FEATURES, MODEL_FILE, NO_FLOOR, CandidateModel
+from endeff_ros.core.candidates import BINARY, FEATURES, MODEL_FILE, CandidateModel
+from endeff_ros.core.confidence import NO_FLOOR
 from endeff_ros.core.errors import InputError
 from endeff_ros.core.params import EndeffParams
 from endeff_ros.scoring import score_frame

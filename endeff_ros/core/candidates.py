@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 import numpy as np
 
 from .additive import AdditiveModel, read_model
+from .placement import height_and_border
 
 if TYPE_CHECKING:
     import numpy.typing as npt
@@ -71,8 +72,6 @@ FEATURES = ('thresholds', 'protrusion', 'order', 'broad', 'cut', 'width', 'aspec
 """Feature names, in column order of :func:`candidate_features`."""
 BINARY = ('thresholds', 'broad', 'cut')
 """Features that are 0 or 1."""
-NO_FLOOR = -1.0
-"""``height`` of every candidate when no floor is known (below any height one can have)."""
 _COLUMN = {name: i for i, name in enumerate(FEATURES)}
 
 
@@ -126,16 +125,8 @@ def candidate_features(estimate: FrameEstimate,
     out[:, col['geodesic']] = np.minimum(geo, 3.0)
     out[:, col['shift']] = [float(np.linalg.norm(c.centre_shift)) for _, c in cands]
     out[:, col['depth']] = pos[:, 2]
-    floor = estimate.floor
-    out[:, col['height']] = (np.clip(floor.distance(pos), -0.5, 3.0) if floor is not None
-                             else NO_FLOOR)
-    if intrinsics is not None:
-        uv = intrinsics.project(pos)
-        to_border = np.minimum.reduce([uv[:, 0], intrinsics.width - 1 - uv[:, 0], uv[:, 1],
-                                       intrinsics.height - 1 - uv[:, 1]])
-        out[:, col['border']] = np.clip(np.nan_to_num(to_border / intrinsics.width), 0, 0.25)
-    else:
-        out[:, col['border']] = 0.25
+    out[:, col['height']], out[:, col['border']] = height_and_border(pos, estimate.floor,
+                                                                     intrinsics)
     start = 0
     for entity in estimate.entities:
         n = len(entity.candidates)

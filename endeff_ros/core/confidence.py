@@ -35,6 +35,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .additive import AdditiveModel, read_model
+from .placement import NO_FLOOR as NO_FLOOR  # re-exported: the sentinel of `height`
+from .placement import height_and_border
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -55,8 +57,6 @@ FEATURES = ('age', 'hit_ratio', 'detected', 'not_related', 'missed', 'geodesic',
 _COLUMN = {name: i for i, name in enumerate(FEATURES)}
 
 _HORIZON = 30  # frames: longer histories are alike (a second at 30 Hz)
-NO_FLOOR = -1.0
-"""``height`` of every end when no floor is known (below any height an end can have)."""
 
 
 def end_features(published: Sequence[Track], states: Sequence[Any],
@@ -87,16 +87,8 @@ def end_features(published: Sequence[Track], states: Sequence[Any],
     out[:, col['speed']] = np.minimum(
         np.linalg.norm(np.array([t.velocity for t in published]).reshape(-1, 3), axis=1), 5.0)
     out[:, col['moved']] = np.minimum([s.moved for s in states], 5.0)
-    floor = estimate.floor
-    out[:, col['height']] = (np.clip(floor.distance(pos), -0.5, 3.0) if floor is not None
-                             else NO_FLOOR)
-    if intrinsics is not None:
-        uv = intrinsics.project(pos)
-        to_border = np.minimum.reduce([uv[:, 0], intrinsics.width - 1 - uv[:, 0], uv[:, 1],
-                                       intrinsics.height - 1 - uv[:, 1]])
-        out[:, col['border']] = np.clip(np.nan_to_num(to_border / intrinsics.width), 0, 0.25)
-    else:
-        out[:, col['border']] = 0.25
+    out[:, col['height']], out[:, col['border']] = height_and_border(pos, estimate.floor,
+                                                                     intrinsics)
     kind = np.array([t.kind for t in published])
     for name, code in (('head', 1), ('hand', 2), ('foot', 3)):
         out[:, col[name]] = kind == code
