@@ -184,6 +184,17 @@ def holdout_fold(name: str) -> int:
     return zlib.crc32(clip.encode()) % 2
 
 
+def holdout_report(bags: list[dict[str, Any]], fit: Callable[[list[dict[str, Any]]], Any],
+                   report: Callable[[list[dict[str, Any]], Any], dict[str, Any]],
+                   ) -> dict[str, Any]:
+    """``--holdout``: per half of the clips (:func:`holdout_fold` of each bag's ``name``), the
+    ``report`` on its bags of the model that ``fit`` made of the other half's."""
+    fold = [holdout_fold(b['name']) for b in bags]
+    return {'folds': [{'held_out_fold': k, **report(
+        [b for b, f in zip(bags, fold, strict=True) if f == k],
+        fit([b for b, f in zip(bags, fold, strict=True) if f != k]))} for k in (0, 1)]}
+
+
 def write_model(model: Any, path: str) -> None:
     """Write ``model`` (its ``to_json``) to ``path``."""
     Path(path).write_text(json.dumps(model.to_json(), indent=1) + '\n', encoding='utf-8')

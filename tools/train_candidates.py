@@ -182,13 +182,7 @@ def main(argv: list[str] | None = None) -> int:
         additive_fit.print_report(report(bags, CandidateModel.load(args.model)), args.json)
         return 0
     if args.holdout:
-        fold = np.array([additive_fit.holdout_fold(b['name']) for b in bags])
-        folds = []
-        for k in (0, 1):
-            model = fit([b for b, f in zip(bags, fold, strict=True) if f != k])
-            held = [b for b, f in zip(bags, fold, strict=True) if f == k]
-            folds.append({'held_out_fold': k, **report(held, model)})
-        additive_fit.print_report({'folds': folds}, args.json)
+        additive_fit.print_report(additive_fit.holdout_report(bags, fit, report), args.json)
         return 0
     model = fit(bags)
     additive_fit.write_model(model, args.model)

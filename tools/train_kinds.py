@@ -263,11 +263,8 @@ def main(argv: list[str] | None = None) -> int:
         additive_fit.print_report(report(bags, KindModels.load(args.model)), args.json)
         return 0
     if args.holdout:
-        fold = [additive_fit.holdout_fold(b['name']) for b in bags]
-        additive_fit.print_report({'folds': [{'held_out_fold': k, **report(
-            [b for b, f in zip(bags, fold, strict=True) if f == k],
-            fit([b for b, f in zip(bags, fold, strict=True) if f != k], penalty=args.penalty))}
-            for k in (0, 1)]}, args.json)
+        additive_fit.print_report(additive_fit.holdout_report(
+            bags, lambda train: fit(train, penalty=args.penalty), report), args.json)
         return 0
     models = fit(bags, penalty=args.penalty)
     additive_fit.write_model(models, args.model)
