@@ -128,3 +128,23 @@ def test_train_candidates_collects_every_candidate_and_fits_a_model(tmp_path) ->
     report = json.loads((tmp_path / 'r.json').read_text(encoding='utf-8'))
     assert report['candidates'] == len(bag['right'])
     assert report['operating_points'][0]['keep'] == 'thresholds'
+
+
+def test_holdout_reports_each_half_of_the_clips_with_the_other_halfs_model() -> None:
+    """``--holdout`` of the fitting tools (``additive_fit.holdout_report``): no clip is both
+    fitted and reported on, and every bag is reported once."""
+    from tools import additive_fit
+
+    bags = [{'name': f'dev__clip{c}__{v}-view-abcdef12'} for c in range(8) for v in range(3)]
+
+    def clips(sel: list[dict]) -> set[str]:
+        return {b['name'].split('__')[1] for b in sel}
+
+    out = additive_fit.holdout_report(bags, lambda train: clips(train),
+                                      lambda held, fitted: {'held': clips(held), 'n': len(held),
+                                                            'fitted': fitted})
+    folds = out['folds']
+    assert [f['held_out_fold'] for f in folds] == [0, 1]
+    assert sum(f['n'] for f in folds) == len(bags)
+    for f in folds:
+        assert f['held'] and f['fitted'] and not f['held'] & f['fitted']
