@@ -15,7 +15,7 @@ import numpy.typing as npt
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from ..bag.outputs import partial_dir, remove, sweep_stale_partials
+from ..bag.outputs import partial_dir, remove, replace_into_place, sweep_stale_partials
 from ..core.types import Intrinsics
 from .frames import SynthFrame
 from .sensor import depth_to_mm
@@ -148,11 +148,8 @@ def write_bags(frames: Iterable[SynthFrame], spec: SequenceSpec, paths: dict[str
             writers.append(w)
         count = _write_frames(writers, frames, spec, seed, custom_data)
         for storage, path in final.items():
-            old = aside[storage] / f'{path.name}.old'
-            if path.exists():
-                path.rename(old)
-            (aside[storage] / path.name).rename(path)
-            remove(aside[storage])
+            replace_into_place(aside[storage] / path.name, path, aside[storage])
+            remove(aside[storage])  # with the bag it replaced
     except BaseException:
         for path in aside.values():
             remove(path)
