@@ -168,20 +168,20 @@ def select_candidates(estimate: E, intrinsics: Intrinsics, params: EndeffParams)
     thresholds keep stays unless it scores below ``drop_candidate_score``, any other needs
     ``min_candidate_score``. Why two: dropping an end the thresholds found risks a person's
     hand, adding one they passed over risks an elbow; people first, the scorer overrules the
-    thresholds' yes only when it is sure (dev clips held out in turn: the scorer alone at
-    0.4 gained 2 points of recall, this rule 6, both with fewer false ends; docs/design.md).
+    thresholds' yes only when it is sure (dev clip halves held out in turn, people: the score
+    alone at 0.4 gained 0.3-0.4 points of recall, this rule 3.9-4.3, both with fewer false
+    ends; docs/design.md).
     Without it, by the thresholds' verdicts."""
     if not any(e.candidates for e in estimate.entities):
         return estimate
     features = candidate_features(estimate, intrinsics)
+    by_thresholds = features[:, _COLUMN['thresholds']] > 0.5
     if params.candidate_scorer:
         score = committed_model()(features)
-        by_thresholds = features[:, _COLUMN['thresholds']] > 0.5
         keep = np.where(by_thresholds, score >= params.drop_candidate_score,
                         score >= params.min_candidate_score)
     else:
-        score = np.full(len(features), np.nan)
-        keep = features[:, _COLUMN['thresholds']] > 0.5
+        score, keep = np.full(len(features), np.nan), by_thresholds
     entities, start = [], 0
     for e in estimate.entities:
         of = slice(start, start + len(e.candidates))
