@@ -8,8 +8,8 @@ Two steps, so the estimator's run (minutes) and the fit (seconds) can be repeate
     python -m tools.train_candidates score DIR [...] [--model M.json] [--json REPORT]
 
 ``collect`` runs the single-frame estimator as ``endeff eval`` does (its own static
-background per bag) with candidates over-generated (``candidate_floor``
-:data:`FLOOR`) and the thresholds deciding, and writes one ``.npz`` per bag: per
+background per bag) with candidates over-generated (the default ``candidate_floor``) and the
+thresholds deciding, and writes one ``.npz`` per bag: per
 over-generated candidate of a frame with ground truth its evidence
 (:func:`~endeff_ros.core.candidates.candidate_features`), its position, whether the frame's
 matching of *all* candidates (0.15 m, as ``endeff eval``) made it right, the thresholds'
@@ -40,8 +40,6 @@ from endeff_ros.core.params import EndeffParams
 from endeff_ros.scoring import score_frame
 from tools import additive_fit
 
-FLOOR = 0.12
-"""``candidate_floor`` of the collection: the least protrusion of an over-generated extreme."""
 BINS = 8
 PENALTY = 30.0
 RIDGE = 1.0
@@ -58,7 +56,7 @@ def collect_bag(bag: Path, params: EndeffParams | None = None, *, out: Path) -> 
 
     from endeff_ros.evaluate import _background_estimate
 
-    params = replace(params or EndeffParams(), candidate_floor=FLOOR, candidate_scorer=False)
+    params = replace(params or EndeffParams(), candidate_scorer=False)  # the default floor
     estimate = _background_estimate()
     feats, right, kept, frame, pos, gts, gt_frame = [], [], [], [], [], [], []
     n = 0
