@@ -360,3 +360,45 @@ def test_a_robot_in_view_from_the_start_keeps_its_pedestal_with_its_moving_arm()
     model, pedestal = _pedestal_with_arm(False, mark=True, params=params)
     assert not model.marking
     assert min(pedestal[-20:]) > 20
+
+
+def test_a_still_person_keeps_the_parts_the_depth_edges_split_off():
+    """A still person whose side the depth edges split off from the component holding their
+    ends (the painted person's left strip, an arm's width) keeps it after the release, as with
+    the background off: it is part of their entity, which their ends flag as a person's, so
+    it is marked and voted for with them (``background.MIN_PART_POINTS``)."""
+    def points(params) -> int:
+        tracker = Tracker(params)
+        for k in range(12):  # learning 0.5 s, the person share decided at 1.3 s
+            result = tracker.update(noisy(k, still_scene()))
+        return points_near(result.estimate.points, PERSON_X, PERSON_Z)
+
+    without = points(PARAMS.replace(background=False))
+    assert without > 300
+    assert points(PARAMS) >= 0.98 * without
+
+
+def test_a_still_person_s_outline_stays_as_without_the_background():
+    """A real sensor's mixed readings on a still person's outline (a ring a little behind
+    them: far-side pixels, which the background keeps only where they changed) stay in the
+    cloud after the learning, as with the background off (``background.OUTLINE_BEHIND_M``);
+    the wall behind the person does not come back with them."""
+    import cv2
+
+    base = still_scene()
+    person = np.abs(base - room()) > 0.1
+    ring = cv2.dilate(person.view(np.uint8), np.ones((5, 5), np.uint8)).view(bool) & ~person
+    base[ring] = PERSON_Z + 0.45
+
+    def outline(params) -> tuple[int, int]:
+        tracker = Tracker(params)
+        for k in range(12):  # past the learning (0.5 s) and the person share (1.3 s)
+            result = tracker.update(noisy(k, base))
+        z = result.estimate.points[:, 2]
+        return (int(np.count_nonzero((z > PERSON_Z + 0.3) & (z < PERSON_Z + 0.6))),
+                int(np.count_nonzero(z > WALL_Z - 0.1)))
+
+    (without, _), (kept, wall) = outline(PARAMS.replace(background=False)), outline(PARAMS)
+    assert without > 100
+    assert kept >= 0.9 * without
+    assert wall == 0
