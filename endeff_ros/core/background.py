@@ -233,16 +233,15 @@ PERSON_SHARE = 0.5
 #: A component holding at least this many points of an entity whose ends are flagged as a
 #: person's is marked and voted for with the components holding those ends: a still person's
 #: side or arm that the depth edges split off from them is theirs (the entity joins what lies
-#: close in 3D), and was otherwise learnt as furniture at the release, a tenth of a painted
-#: still person's points. A few points, not one: a flying point on a wall is no part. Test
-#: split slow bags 0.607 -> 0.623 recall, still 0.643 both; its price, furniture that the
-#: entity joins to a person at the start: 29 furnished dev bags FPR 0.411 -> 0.424.
+#: close in 3D), and would otherwise be learnt as furniture at the release. A few points, not
+#: one: a flying point on a wall is no part (measured: design.md, "Parts of a person of the
+#: start").
 MIN_PART_POINTS = 5
-#: A far-side pixel next to a kept entity of the start and at most this far behind it (m)
-#: stays with it (:meth:`BackgroundModel.foreground`): a real sensor's mixed readings on a
-#: still person's outline, kept as the background-free candidate keeps them, not the wall
-#: behind (1 m and more in the rooms people stand in). Real frames played still, FPR 0.124
-#: -> 0.121 (background off 0.122).
+#: A far-side pixel next to a still kept entity of the start and at most this far behind
+#: it (m) stays with it (:meth:`BackgroundModel.foreground`): a real sensor's mixed readings
+#: on a still person's outline, kept as the background-free candidate keeps them, not the
+#: wall behind (1 m and more in the rooms people stand in; design.md, "A still person's
+#: outline").
 OUTLINE_BEHIND_M = 0.5
 
 
@@ -320,6 +319,18 @@ def _windows(image: npt.NDArray, uv: npt.NDArray[np.int64]) -> npt.NDArray:
     uu = np.clip(uv[:, 0, None, None] + offsets[None, None, :], 0, w - 1)
     vv = np.clip(uv[:, 1, None, None] + offsets[None, :, None], 0, h - 1)
     return image[vv, uu].reshape(len(uv), len(offsets) ** 2)
+
+
+def _project(points: npt.NDArray[np.float64], intrinsics: Intrinsics, stride: int
+             ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+    """Per point of ``points`` (N, 3, optical frame): the column and row (rounded, float) of
+    the strided image's pixel it projects on, and whether it projects at all (in front of
+    the camera, finite)."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        u = np.round((intrinsics.fx * pts[:, 0] / pts[:, 2] + intrinsics.cx) / stride)
+        v = np.round((intrinsics.fy * pts[:, 1] / pts[:, 2] + intrinsics.cy) / stride)
+    return u, v, (pts[:, 2] > 1e-6) & np.isfinite(u) & np.isfinite(v)
 
 
 def _components_hit(labels: npt.NDArray[np.int32], n_labels: int,
@@ -757,12 +768,13 @@ class BackgroundModel:
         static = ((self._static_z > 0) & margin_ok & (t - self._static_since >= STATIC_S)
                   & ~there)
         out = (fg & ~(static & ~changed)) | (edge & changed)
-        if initial.any():
+        still_initial = initial & ~moving
+        if still_initial.any():
             # The far sides of a still kept entity of the start's outline within
             # OUTLINE_BEHIND_M behind it, as the candidate has them: they never change, and
             # ``edge & changed`` alone would cut a still person's outline, which the
             # background must not touch. Not a moving one's: its outline changes.
-            kept_z = np.where(np.take(initial & ~moving, labels), d, np.float32(0))
+            kept_z = np.where(np.take(still_initial, labels), d, np.float32(0))
             near_z = cv2.dilate(kept_z, np.ones((3, 3), np.uint8))
             out |= edge & (near_z > 0) & (d <= near_z + OUTLINE_BEHIND_M)
         out = _with_feet(out, d, low, candidate, far_side, stride)
@@ -849,11 +861,7 @@ class BackgroundModel:
         pixels of ``person_points`` when given, in the frames the ``judged`` ones count for
         (:meth:`mark`)."""
         labels = self._labels
-        pts = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-        with np.errstate(divide='ignore', invalid='ignore'):
-            u = np.round((intrinsics.fx * pts[:, 0] / pts[:, 2] + intrinsics.cx) / stride)
-            v = np.round((intrinsics.fy * pts[:, 1] / pts[:, 2] + intrinsics.cy) / stride)
-        ok = (pts[:, 2] > 1e-6) & np.isfinite(u) & np.isfinite(v)
+        u, v, ok = _project(positions, intrinsics, stride)
         uv = np.stack([u[ok], v[ok]], axis=1).astype(np.int64)
         hit = (self._track_labels(labels, uv) if labels is not None
                else np.zeros(len(uv), np.int32))
@@ -864,9 +872,10 @@ class BackgroundModel:
             if self._marking and self._confirming and self._last is not None:
                 # The components holding a flagged entity's points (MIN_PART_POINTS): its
                 # parts that the depth edges split off, with or without an end of their own.
-                parts = (None if person_points is None else _components_hit(
-                    labels, n_labels, self._point_labels(person_points, intrinsics, stride),
-                    MIN_PART_POINTS))
+                person_uv = (None if person_points is None
+                             else self._point_uv(person_points, intrinsics, stride))
+                parts = (None if person_uv is None else _components_hit(
+                    labels, n_labels, labels[person_uv], MIN_PART_POINTS))
                 if self.learning:
                     mark = held if parts is None else held | parts
                     mark = mark & (self._init_z == 0) & (self._last.depth > 0)
@@ -881,8 +890,7 @@ class BackgroundModel:
                     flags = np.asarray(person, dtype=bool).reshape(-1)[ok]
                     held = _components_hit(labels, n_labels, hit[flags])
                     if parts is not None:
-                        held = (held | parts) & self._point_pixels(person_points, intrinsics,
-                                                                   stride)
+                        held = (held | parts) & self._point_pixels(person_uv)
                     self._init_votes[held & (self._init_z > 0)] += 1
         return ok, uv, hit
 
@@ -910,28 +918,19 @@ class BackgroundModel:
         """The rows and columns of the strided image's pixels that ``points`` (N, 3, optical
         frame) project on, those inside the image."""
         shape = self._labels.shape
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        pts = pts[pts[:, 2] > 1e-6]
-        u = np.round((intrinsics.fx * pts[:, 0] / pts[:, 2] + intrinsics.cx) / stride)
-        v = np.round((intrinsics.fy * pts[:, 1] / pts[:, 2] + intrinsics.cy) / stride)
-        inside = (u >= 0) & (u < shape[1]) & (v >= 0) & (v < shape[0])
+        u, v, ok = _project(points, intrinsics, stride)
+        inside = ok & (u >= 0) & (u < shape[1]) & (v >= 0) & (v < shape[0])
         return v[inside].astype(np.intp), u[inside].astype(np.intp)
 
-    def _point_pixels(self, points: npt.NDArray[np.float64], intrinsics: Intrinsics,
-                      stride: int) -> npt.NDArray[np.bool_]:
-        """The pixels of the strided image that ``points`` (N, 3, optical frame) project on,
-        grown by :data:`PERSON_GROW_PX` (the cloud's points are voxel means, sparser than the
+    def _point_pixels(self, uv: tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]
+                      ) -> npt.NDArray[np.bool_]:
+        """The pixels ``uv`` (rows, columns: :meth:`_point_uv`) of the strided image grown
+        by :data:`PERSON_GROW_PX` (the cloud's points are voxel means, sparser than the
         pixels, and a person's outline pixels may hold no point)."""
         out = np.zeros(self._labels.shape, np.uint8)
-        out[self._point_uv(points, intrinsics, stride)] = 1
+        out[uv] = 1
         k = 2 * PERSON_GROW_PX + 1
         return cv2.dilate(out, np.ones((k, k), np.uint8)).view(bool)
-
-    def _point_labels(self, points: npt.NDArray[np.float64], intrinsics: Intrinsics,
-                      stride: int) -> npt.NDArray[np.int32]:
-        """The label (0: none) of the strided pixel each of ``points`` (N, 3, optical frame)
-        projects on, for those inside the image."""
-        return self._labels[self._point_uv(points, intrinsics, stride)]
 
     def _track_labels(self, labels: npt.NDArray[np.int32],
                       uv: npt.NDArray[np.int64]) -> npt.NDArray[np.int32]:
