@@ -234,14 +234,14 @@ PERSON_SHARE = 0.5
 #: person's is marked and voted for with the components holding those ends: a still person's
 #: side or arm that the depth edges split off from them is theirs (the entity joins what lies
 #: close in 3D), and would otherwise be learnt as furniture at the release. A few points, not
-#: one: a flying point on a wall is no part (measured: design.md, "Parts of a person of the
-#: start").
+#: one: a flying point on a wall is no part (measured: design.md, "Parts and outline of a
+#: person of the start").
 MIN_PART_POINTS = 5
 #: A far-side pixel next to a still kept entity of the start and at most this far behind
 #: it (m) stays with it (:meth:`BackgroundModel.foreground`): a real sensor's mixed readings
 #: on a still person's outline, kept as the background-free candidate keeps them, not the
-#: wall behind (1 m and more in the rooms people stand in; design.md, "A still person's
-#: outline").
+#: wall behind (1 m and more in the rooms people stand in; design.md, "Parts and
+#: outline of a person of the start").
 OUTLINE_BEHIND_M = 0.5
 
 
