@@ -15,7 +15,10 @@ thresholds:
   far its part centre lies behind the rounded end;
 - its place among its entity's ends: their count, its geodesic over the entity's longest,
   the nearest other end (second copies beside a hand); the entity's size;
-- its speed now and the highest its track ever had, and the part it is (``kind``).
+- its speed now and the highest its track ever had, and the part it is (``kind``);
+- the candidate scorer's verdict (:mod:`.candidates`) on the candidate that last supported
+  it and its mean over the track's supporting candidates: the scorer sees a candidate's
+  shape in one frame, the confidence adds what the track has seen since.
 
 The model is additive and logistic: each feature cut at fixed edges (quantiles of the
 training ends), one weight per interval, ``confidence = 1 / (1 + exp(-(b + sum_f w_f[bin])))``.
@@ -52,7 +55,7 @@ MODEL_FILE = Path(__file__).with_name('confidence_model.json')
 FEATURES = ('age', 'hit_ratio', 'detected', 'not_related', 'missed', 'geodesic',
             'protrusion', 'straightness', 'shift', 'depth', 'entity_ends', 'geodesic_share',
             'nearest_end', 'entity_size', 'height', 'border', 'speed', 'moved', 'head', 'hand',
-            'foot')
+            'foot', 'candidate_score', 'score_mean')
 """Feature names, in column order of :func:`end_features`."""
 _COLUMN = {name: i for i, name in enumerate(FEATURES)}
 
@@ -64,7 +67,8 @@ def end_features(published: Sequence[Track], states: Sequence[Any],
                  ) -> npt.NDArray[np.float64]:
     """(M, len(FEATURES)) evidence per published end. ``states`` are the tracker's
     per-track memories in the same order (``age``, ``hits``, ``detected``, ``not_related``,
-    ``missed``, ``protrusion``, ``centre_shift``, ``moved``), ``estimate`` the frame's
+    ``missed``, ``protrusion``, ``centre_shift``, ``moved``, ``score``, ``score_sum``),
+    ``estimate`` the frame's
     (entities, roots, points, floor), ``intrinsics`` its camera (None: no image border)."""
     m = len(published)
     out = np.zeros((m, len(FEATURES)))
@@ -82,6 +86,8 @@ def end_features(published: Sequence[Track], states: Sequence[Any],
     out[:, col['missed']] = np.minimum([s.missed for s in states], _HORIZON)
     out[:, col['geodesic']] = np.where(np.isfinite(geo), geo, 0.0)
     out[:, col['protrusion']] = [s.protrusion for s in states]
+    out[:, col['candidate_score']] = [s.score for s in states]
+    out[:, col['score_mean']] = [s.score_sum / max(s.hits, 1) for s in states]
     out[:, col['shift']] = [float(np.linalg.norm(s.centre_shift)) for s in states]
     out[:, col['depth']] = pos[:, 2]
     out[:, col['speed']] = np.minimum(

@@ -173,6 +173,10 @@ class _TrackState:
     offset: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     hits: int = 1  # frames in which a current candidate supported the track
     protrusion: float = 0.0  # of the candidate that last supported it (Candidate.protrusion)
+    # The candidate scorer's chance for the candidate that last supported it, and the sum over
+    # all that did (its mean: score_sum / hits); 1 for one not scored (_candidate_score).
+    score: float = 1.0
+    score_sum: float = 1.0
     held: int = 0  # consecutive frames on its prediction (case B or C)
     # From ``position`` (the rounded end's centre, which is tracked) to the part centre
     # published; a prediction keeps the last detection's (Candidate.centre_shift).
@@ -184,6 +188,12 @@ class _TrackState:
     velocity: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     stamp_ns: int = -1
     moved: float = 0.0  # the highest speed (m/s) of its published velocity so far
+
+
+def _candidate_score(cand: Candidate) -> float:
+    """The candidate scorer's chance for ``cand`` (:mod:`.candidates`); 1 when it was not
+    scored (``candidate_floor`` 0: the thresholds alone kept it)."""
+    return 1.0 if np.isnan(cand.score) else float(cand.score)
 
 
 @dataclass(frozen=True)
@@ -557,7 +567,8 @@ class Tracker:
             survivors.append(_TrackState(
                 id=track_id, position=cand.end_centre, geodesic=cand.geodesic_approx,
                 entity=cand_entity[j], path=cand.path, centre_shift=cand.centre_shift,
-                protrusion=cand.protrusion))
+                protrusion=cand.protrusion, score=_candidate_score(cand),
+                score_sum=_candidate_score(cand)))
         return self._drop_duplicates(survivors)
 
     def _on_limb(self, track: _TrackState, cand: Candidate) -> bool:
@@ -741,6 +752,8 @@ class Tracker:
         track.centre_shift = cand.centre_shift
         track.path = cand.path
         track.protrusion = cand.protrusion
+        track.score = _candidate_score(cand)
+        track.score_sum += track.score
         track.held = 0
         track.hits += 1
         track.detected = True
