@@ -304,6 +304,37 @@ def test_frames_that_cannot_tell_a_person_do_not_count_against_them():
     assert max(person[release + 1:]) == 0
 
 
+def test_an_entity_of_the_start_is_judged_again_while_it_stays():
+    """After the release, the entities of the start that stayed are judged again every
+    ``background_person_s``: one whose ends stop being taken for a person's (furniture that
+    shared a walker's entity in the first second, kept after they left) is learnt as
+    background at the end of the next window; one taken for a person's in a third of its
+    frames, above ``REJUDGE_SHARE``, stays; and with fewer than ``REJUDGE_MIN_FRAMES`` frames
+    in a window (a slow stream) there is no verdict, and the entity stays."""
+    dt = 100_000_000  # 10 Hz: 15 frames in a window of 1.5 s
+    params = replace(PARAMS, background_keep_furniture=False, background_person_s=1.5)
+    release = round((params.background_learn_s + params.background_person_s) * 1e9 / dt)
+    judged_at = release + round(params.background_person_s * 1e9 / dt)
+    near = lambda pos: np.abs(pos[:, 0] - PERSON_X) < 0.4  # noqa: E731
+
+    def person_points(flag, frames: int = judged_at + 12, dt: int = dt) -> list[int]:
+        model, person = BackgroundModel(), []
+        for k in range(frames):
+            est = estimate_frame(noisy(k, still_scene(chair=True), dt), params,
+                                 background=model)
+            pos = est.positions()
+            model.mark(pos, K, params.pixel_stride, near(pos) & flag(k))
+            person.append(points_near(est.points, PERSON_X, PERSON_Z))
+        return person
+
+    until_release = person_points(lambda k: k < release)
+    assert min(until_release[:judged_at - 1]) > 300  # kept through the first window
+    assert max(until_release[judged_at + 2:]) == 0
+    assert min(person_points(lambda k: k < release or k % 3 == 0)) > 300
+    slow = person_points(lambda k: k < release // 4, frames=(judged_at + 12) // 4, dt=4 * dt)
+    assert min(slow) > 300  # 2.5 Hz: 3-4 frames a window, never judged again
+
+
 def test_an_entity_with_too_few_ends_is_not_judged():
     """:func:`judged_candidates`: a flagged end is judged; an unflagged one only on an entity
     with at least ``MIN_PERSON_ENDS`` ends."""

@@ -237,6 +237,17 @@ PERSON_SHARE = 0.5
 #: one: a flying point on a wall is no part (measured: design.md, "Parts and outline of a
 #: person of the start").
 MIN_PART_POINTS = 5
+#: After the release, the entities of the start that stay are judged again every
+#: ``background_person_s``: a kept one whose end-effectors were taken for a person's in
+#: fewer than this share of the frames an end-effector lay on it (at least
+#: REJUDGE_MIN_FRAMES of them) is learnt as background then. The furniture a walker passing
+#: it in the first second shared an entity with keeps their votes at the release and their
+#: marks after they left; the chair's own ends are not taken for a person's. Below
+#: PERSON_SHARE: a still person is judged again for as long as they stay, and must not fail
+#: once. No verdict in a window with fewer frames (a slow stream): people first. Measured:
+#: design.md, "The static background", furniture of the start.
+REJUDGE_SHARE = 0.2
+REJUDGE_MIN_FRAMES = 10
 #: A far-side pixel next to a still kept entity of the start and at most this far behind
 #: it (m) stays with it (:meth:`BackgroundModel.foreground`): a real sensor's mixed readings
 #: on a still person's outline, kept as the background-free candidate keeps them, not the
@@ -467,6 +478,8 @@ class BackgroundModel:
         self._init_votes = np.zeros(shape, np.uint16)
         self._release_at = (None if params.background_keep_furniture or not self._marking
                             else t + params.background_learn_s + params.background_person_s)
+        self._person_s = params.background_person_s  # the window of each judgement
+        self._rejudging = False  # the first release has passed (REJUDGE_SHARE)
         self._learn_until = t + params.background_learn_s
         self._settling = False
         # The grey images of earlier views say nothing of this one, but this frame's own (taken
@@ -799,8 +812,12 @@ class BackgroundModel:
             # person's component (a shelf beside them), they would otherwise stay with it for
             # as long as they touch. Not in a component that moves or moved within HOLD_S: a
             # robot's pedestal stays with its moving arm.
-            person = (self._init_votes > 0) & (self._init_votes >= PERSON_SHARE
-                                               * self._init_seen)
+            if self._rejudging:  # no verdict without enough frames: people first
+                person = ((self._init_seen < REJUDGE_MIN_FRAMES)
+                          | (self._init_votes >= REJUDGE_SHARE * self._init_seen))
+            else:
+                person = (self._init_votes > 0) & (self._init_votes >= PERSON_SHARE
+                                                   * self._init_seen)
             recent = np.bincount(labels[self._t - self._kept_t <= HOLD_S],
                                  minlength=len(moving)) > 0
             active = np.take(moving | recent[:len(moving)], labels)
@@ -809,7 +826,11 @@ class BackgroundModel:
             self._static_z[furniture] = np.where(d > 0, d, self._init_z)[furniture]
             self._static_since[furniture] = self._t - STATIC_S
             self._init_z[~person] = 0
-            self._release_at = None
+            self._init_seen.fill(0)
+            self._init_votes.fill(0)
+            self._rejudging = True
+            self._release_at = (self._t + self._person_s if (self._init_z > 0).any()
+                                else None)
         marked = self._init_z > 0
         if not marked.any():
             return np.zeros(len(total), bool), marked
@@ -834,7 +855,11 @@ class BackgroundModel:
         in fewer than :data:`PERSON_SHARE` of the frames an end-effector lay on it, while
         learning and within ``background_person_s`` after it, is forgotten then and learnt as
         background: furniture, by the kinds of a whole second (a person's ends are often not
-        yet taken for a person's in the first frames, a cabinet's now and then are).
+        yet taken for a person's in the first frames, a cabinet's now and then are). What
+        stays is judged again in each following window of ``background_person_s``, and
+        forgotten when its ends were taken for a person's in fewer than
+        :data:`REJUDGE_SHARE` of its frames there (furniture joined to a walker's entity at
+        the start, after the walker left).
         ``person_points`` (optional): the points of the flagged end-effectors' entities; only
         the pixels they cover keep their marks, on the components of the flagged ends and on
         those holding :data:`MIN_PART_POINTS` of these points (a part the depth edges split off
@@ -896,8 +921,9 @@ class BackgroundModel:
 
     @property
     def _confirming(self) -> bool:
-        """True while the entities of the start are marked (learning) or may still show a
-        person's end (until ``background_person_s`` after learning)."""
+        """True while the entities of the start are marked (learning) or judged (until
+        ``background_person_s`` after learning, then in each following window for as long
+        as any stays)."""
         return self.learning or (self._release_at is not None and self._t < self._release_at)
 
     @property
@@ -909,8 +935,8 @@ class BackgroundModel:
     @property
     def wants_people(self) -> bool:
         """True while the ``person`` flags of :meth:`mark` and :meth:`protect` decide which
-        entities of the start stay (``background_keep_furniture`` false, within
-        ``background_person_s``); otherwise they are not read, and callers pass None."""
+        entities of the start stay (``background_keep_furniture`` false, while any is judged:
+        :attr:`_confirming`); otherwise they are not read, and callers pass None."""
         return self.marking and self._release_at is not None
 
     def _point_uv(self, points: npt.NDArray[np.float64], intrinsics: Intrinsics,

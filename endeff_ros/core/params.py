@@ -90,8 +90,10 @@ class EndeffParams:
                                          'after the learning.')
     background_person_s: float = _p(0.8, 'Static background: with background_keep_furniture '
                                     'false, the time after the learning within which an entity '
-                                    "of the start must once show an end taken for a person's "
-                                    '(kind) to stay.', unit='s', lo=0.0, hi=3600.0)
+                                    "of the start must show ends taken for a person's (kind) "
+                                    'to stay, and the window in which one that stayed is judged '
+                                    'again for as long as it stays.', unit='s', lo=0.0,
+                                    hi=3600.0)
     background_learn_s: float = _p(0.2, 'Static background: learning time after the start, a '
                                    'reset or a camera motion, during which nothing is removed.',
                                    unit='s', lo=0.0, hi=60.0)
