@@ -564,11 +564,11 @@ class Tracker:
         self._roots = roots
         for j, track_id in zip(new, ids):
             cand = cands[j]
+            score = _candidate_score(cand)
             survivors.append(_TrackState(
                 id=track_id, position=cand.end_centre, geodesic=cand.geodesic_approx,
                 entity=cand_entity[j], path=cand.path, centre_shift=cand.centre_shift,
-                protrusion=cand.protrusion, score=_candidate_score(cand),
-                score_sum=_candidate_score(cand)))
+                protrusion=cand.protrusion, score=score, score_sum=score))
         return self._drop_duplicates(survivors)
 
     def _on_limb(self, track: _TrackState, cand: Candidate) -> bool:
