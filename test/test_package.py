@@ -348,7 +348,7 @@ def test_package_xml() -> None:
 #: brings zstandard).
 ROSDEP_KEYS = {'cv2': 'python3-opencv', 'numpy': 'python3-numpy', 'scipy': 'python3-scipy',
                'yaml': 'python3-yaml', 'matplotlib': 'python3-matplotlib',
-               'tqdm': 'python3-tqdm', 'rosbags': 'python3-rosbags-pip',
+               'tqdm': 'python3-tqdm', 'numba': 'python3-numba', 'rosbags': 'python3-rosbags-pip',
                'mcap': 'mcap-ros2-support', 'zstandard': 'mcap-ros2-support'}
 #: Imported but deliberately not declared, and why.
 NOT_DECLARED = {

@@ -141,10 +141,11 @@ from typing import TYPE_CHECKING, NamedTuple
 import cv2
 import numpy as np
 
+from . import kernels
 from .depth_edges import (
     EDGE_STEP,
     EDGE_STEP_Z,
-    bridge_dropouts,
+    bridged_edges,
     depth_components,
     far_side_pixels,
 )
@@ -286,8 +287,13 @@ def _enough(labels: npt.NDArray[np.int32], hits: npt.NDArray[np.bool_],
             total: npt.NDArray[np.int64], fraction: float, stride: int) -> npt.NDArray[np.bool_]:
     """Per label of ``labels``, whether enough of its pixels are ``hits``: ``fraction`` of its
     ``total`` pixels and MIN_CHANGED_PX full-resolution pixels (label 0: never)."""
-    need = np.maximum(MIN_CHANGED_PX / stride ** 2, fraction * total)
-    enough = np.bincount(labels[hits], minlength=len(total)) >= need
+    return _enough_of(np.bincount(labels[hits], minlength=len(total)), total, fraction, stride)
+
+
+def _enough_of(counts: npt.NDArray[np.int64], total: npt.NDArray[np.int64], fraction: float,
+               stride: int) -> npt.NDArray[np.bool_]:
+    """Per label, whether its ``counts`` of hits are enough (:func:`_enough`)."""
+    enough = counts >= np.maximum(MIN_CHANGED_PX / stride ** 2, fraction * total)
     enough[0] = False
     return enough
 
@@ -644,6 +650,108 @@ class BackgroundModel:
                 d, candidate, stride, far_side_pixels(d, stride, flying=colour_live))
             return candidate.copy()
 
+        bg, adopt, changed = self._update_depths(d, valid, known, nearer, farther, margin, t,
+                                                 params)
+        self._bg = bg
+
+        upper = candidate if low is None else candidate & ~low
+        # Labelled across dropouts; the bridging pixels then belong to no component.
+        # Flying pixels are cut only while colour comes: a fist punched at the camera may hang
+        # on its still chest by them alone, and without colour the chest has no evidence of
+        # its own motion (docs/design.md, "Flying pixels cut").
+        bridged, mask, far_side = bridged_edges(d, upper, stride,
+                                                flying=colour_live or color is not None)
+        labels, edge = depth_components(bridged, mask, stride, far_side)
+        labels[~upper] = 0
+        edge &= upper
+        self._labels = labels
+        n = int(labels.max()) + 1
+        total = np.bincount(labels.ravel(), minlength=n)
+        if t < self._learn_until:
+            if stirred is None or self._marking:
+                # Without colour, or while the entities of the start are marked (a person
+                # in view who keeps still stirs nothing): everything is kept.
+                return candidate.copy()
+            # Learning with colour: only what stirs (a person present from the start has not
+            # moved in depth yet; furniture does neither).
+            out = np.take(_enough(labels, stirred, total, COLOR_MIN_FRACTION, stride),
+                          labels) & candidate
+            left = upper & ~out
+            same = left & (self._still_n > 0) & (np.abs(d - self._still_z) <= margin)
+            self._still_n = np.where(left, np.where(same, self._still_n + 1, 1),
+                                     0).astype(np.int16, copy=False)
+            self._still_z = np.where(left & ~same, d, self._still_z)
+            return _with_feet(out, d, low, candidate, far_side, stride)
+        if not self._seeded:
+            # Learning has ended: what the colour saw standing still is certified now, not
+            # STATIC_S after it (by then a still person's arm may have joined it).
+            self._seeded = True
+            seed = ((self._still_n >= STILL_LEARNING_FRAMES)
+                    & (np.abs(d - self._still_z) <= margin))
+            self._static_z[seed] = d[seed]
+            self._static_since[seed] = t - STATIC_S
+        changed = cv2.morphologyEx(changed, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)).view(bool)
+        n_changed, n_stirred, n_recent = self._label_counts(labels, changed, stirred, d, margin,
+                                                            t, n)
+        moving = _enough_of(n_changed, total, MIN_CHANGED_FRACTION, stride)
+        initial, there = self._initial_labels(d, labels, total, margin, adopt, stride, moving)
+        # Components with changed pixels renew the hold (:meth:`_certify`); one that moves by
+        # colour alone only on the surface that also stirred within COLOR_CONFIRM_S.
+        by_colour = (None if stirred is None
+                     else _enough_of(n_stirred, total, COLOR_MIN_FRACTION, stride))
+        # Held: pixels kept because of changed pixels within HOLD_S, at the same depth (the
+        # same surface, not the wall an arm swept over).
+        held = n_recent >= HOLD_FRACTION * total
+        moved = moving if by_colour is None else moving | by_colour
+        # Entities of the start count as moving for the tracks on them (carried through a
+        # camera motion, as a moving person's are).
+        self._moving_labels = moved | initial
+        keep = moved | held | initial
+        keep[self._track_labels(labels, self._carried_uv)] = True
+        keep[0] = False
+        k = 2 * COLOR_RELEASE_PX + 1
+        stirred_near = (None if stirred is None else cv2.dilate(
+            stirred.view(np.uint8), np.ones((k, k), np.uint8)).view(bool))
+        out = self._certify(labels, moving, by_colour, keep, candidate, d, margin, changed, edge,
+                            there, stirred_near, t)
+        moving = moved
+        still_initial = initial & ~moving
+        if still_initial.any():
+            # The far sides of a still kept entity of the start's outline within
+            # OUTLINE_BEHIND_M behind it, as the candidate has them: they never change, and
+            # ``edge & changed`` alone would cut a still person's outline, which the
+            # background must not touch. Not a moving one's: its outline changes.
+            kept_z = np.where(np.take(still_initial, labels), d, np.float32(0))
+            near_z = cv2.dilate(kept_z, np.ones((3, 3), np.uint8))
+            out |= edge & (near_z > 0) & (d <= near_z + OUTLINE_BEHIND_M)
+        out = _with_feet(out, d, low, candidate, far_side, stride)
+        if low is not None:
+            out |= low & candidate & changed
+        self._out = out
+        return out
+
+    def _update_depths(self, d: npt.NDArray[np.float32], valid: npt.NDArray[np.bool_],
+                       known: npt.NDArray[np.bool_], nearer: npt.NDArray[np.bool_],
+                       farther: npt.NDArray[np.bool_], margin: npt.NDArray[np.float32],
+                       t: float, params: EndeffParams
+                       ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_],
+                                  npt.NDArray[np.uint8]]:
+        """The background depth's update from the frame ``d`` (:meth:`foreground`): the new
+        background (a new array: callers of ``background`` may hold the last one), the pixels
+        whose farther reading it adopted, and the changed pixels before the opening (uint8:
+        nearer and not absorbed, or read where nothing was and not adopted). One compiled
+        pass when :data:`.kernels.ENABLED`, the numpy rules otherwise (the reference)."""
+        if kernels.ENABLED:
+            new_bg = np.empty_like(self._bg)
+            changed = np.empty(d.shape, np.uint8)
+            adopt = np.empty(d.shape, bool)
+            kernels.update_depths(d, valid, known, nearer, farther, margin, self._bg,
+                                  self._far_n, self._far_ref, self._far_t, self._miss_n,
+                                  self._near_ref, self._near_since, t,
+                                  params.background_absorb_s, np.float32(FOLLOW), FAR_FRAMES,
+                                  MISS_FRAMES, new_bg, changed, adopt)
+            return new_bg, adopt, changed
+        bg = self._bg
         # Farther readings, and readings where nothing was seen yet (no reading is beyond
         # the sensor's range: the farthest of all), are adopted once FAR_FRAMES consecutive
         # frames agree; until then a reading where nothing was seen counts as changed (a
@@ -684,64 +792,55 @@ class BackgroundModel:
         self._near_ref[moved_nearer] = d[moved_nearer]
         absorb = nearer & (t - self._near_since >= params.background_absorb_s)
         bg[absorb] = d[absorb]
-        self._bg = bg
+        return bg, adopt, ((nearer & ~absorb) | (fresh & ~adopt)).view(np.uint8)
 
-        upper = candidate if low is None else candidate & ~low
-        # Labelled across dropouts; the bridging pixels then belong to no component.
-        bridged, mask = bridge_dropouts(d, upper)
-        # Flying pixels are cut only while colour comes: a fist punched at the camera may hang
-        # on its still chest by them alone, and without colour the chest has no evidence of
-        # its own motion (docs/design.md, "Flying pixels cut").
-        far_side = far_side_pixels(bridged, stride, flying=colour_live or color is not None)
-        labels, edge = depth_components(bridged, mask, stride, far_side)
-        labels[~upper] = 0
-        edge &= upper
-        self._labels = labels
-        n = int(labels.max()) + 1
-        total = np.bincount(labels.ravel(), minlength=n)
-        if t < self._learn_until:
-            if stirred is None or self._marking:
-                # Without colour, or while the entities of the start are marked (a person
-                # in view who keeps still stirs nothing): everything is kept.
-                return candidate.copy()
-            # Learning with colour: only what stirs (a person present from the start has not
-            # moved in depth yet; furniture does neither).
-            out = np.take(_enough(labels, stirred, total, COLOR_MIN_FRACTION, stride),
-                          labels) & candidate
-            left = upper & ~out
-            same = left & (self._still_n > 0) & (np.abs(d - self._still_z) <= margin)
-            self._still_n = np.where(left, np.where(same, self._still_n + 1, 1),
-                                     0).astype(np.int16, copy=False)
-            self._still_z = np.where(left & ~same, d, self._still_z)
-            return _with_feet(out, d, low, candidate, far_side, stride)
-        if not self._seeded:
-            # Learning has ended: what the colour saw standing still is certified now, not
-            # STATIC_S after it (by then a still person's arm may have joined it).
-            self._seeded = True
-            seed = ((self._still_n >= STILL_LEARNING_FRAMES)
-                    & (np.abs(d - self._still_z) <= margin))
-            self._static_z[seed] = d[seed]
-            self._static_since[seed] = t - STATIC_S
-        changed = cv2.morphologyEx(((nearer & ~absorb) | (fresh & ~adopt)).view(np.uint8),
-                                   cv2.MORPH_OPEN,
-                                   np.ones((3, 3), np.uint8)).view(bool)
-        moving = _enough(labels, changed, total, MIN_CHANGED_FRACTION, stride)
-        initial, there = self._initial_labels(d, labels, total, margin, adopt, stride, moving)
-        # Components with changed pixels renew the hold (below); one that moves by colour
-        # alone only on the surface that also stirred within COLOR_CONFIRM_S.
+    def _label_counts(self, labels: npt.NDArray[np.int32], changed: npt.NDArray[np.bool_],
+                      stirred: npt.NDArray[np.bool_] | None, d: npt.NDArray[np.float32],
+                      margin: npt.NDArray[np.float32], t: float, n: int
+                      ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64] | None,
+                                 npt.NDArray[np.int64]]:
+        """Per label of ``labels`` (``n`` of them), its pixels that ``changed``, that
+        ``stirred`` (None without colour evidence) and that were held within ``HOLD_S`` at
+        their depth (:meth:`foreground`). One compiled pass when :data:`.kernels.ENABLED`."""
+        if kernels.ENABLED:
+            counts = np.zeros((3, n), np.int64)
+            kernels.label_counts(labels, changed, changed if stirred is None else stirred,
+                                 stirred is not None, d, self._kept_t, self._kept_z, margin, t,
+                                 HOLD_S, counts[0], counts[1], counts[2])
+            return counts[0], None if stirred is None else counts[1], counts[2]
+        recent = (t - self._kept_t <= HOLD_S) & (np.abs(d - self._kept_z) <= margin)
+        return (np.bincount(labels[changed], minlength=n),
+                None if stirred is None else np.bincount(labels[stirred], minlength=n),
+                np.bincount(labels[recent], minlength=n))
+
+    def _certify(self, labels: npt.NDArray[np.int32], moving: npt.NDArray[np.bool_],
+                 by_colour: npt.NDArray[np.bool_] | None, keep: npt.NDArray[np.bool_],
+                 candidate: npt.NDArray[np.bool_], d: npt.NDArray[np.float32],
+                 margin: npt.NDArray[np.float32], changed: npt.NDArray[np.bool_],
+                 edge: npt.NDArray[np.bool_], there: npt.NDArray[np.bool_],
+                 stirred_near: npt.NDArray[np.bool_] | None, t: float) -> npt.NDArray[np.bool_]:
+        """The per-pixel rules of :meth:`foreground` after the labels' verdicts: the hold
+        renewed, static surfaces certified, kept and released, and the foreground returned.
+        Per label: ``moving`` (changed pixels), ``by_colour`` (stirred; None without colour
+        evidence), ``keep``; per pixel: the ``there`` of the entities of the start and
+        ``stirred_near``, the stirred pixels grown by ``COLOR_RELEASE_PX``. One compiled pass
+        when :data:`.kernels.ENABLED`, the numpy rules otherwise (the reference)."""
+        if kernels.ENABLED:
+            out = np.empty(d.shape, bool)
+            colour = by_colour is not None
+            kernels.certify(labels, moving, by_colour if colour else moving, colour, keep,
+                            candidate, d, margin, changed, edge, there,
+                            stirred_near if colour else changed, self._colour_t,
+                            self._colour_z, self._kept_t, self._kept_z, self._static_z,
+                            self._static_since, t, COLOR_CONFIRM_S, STATIC_S, out)
+            return out
         renew = np.take(moving, labels)  # moving[labels], 2-3x faster
-        if stirred is not None:
-            by_colour = _enough(labels, stirred, total, COLOR_MIN_FRACTION, stride)
+        if by_colour is not None:
             on_colour = np.take(by_colour, labels)
             renew |= (on_colour & (t - self._colour_t <= COLOR_CONFIRM_S)
                       & (np.abs(d - self._colour_z) <= margin))
             self._colour_t[on_colour] = t
             self._colour_z[on_colour] = d[on_colour]
-            moving |= by_colour
-        # Held: pixels kept because of changed pixels within HOLD_S, at the same depth (the
-        # same surface, not the wall an arm swept over).
-        recent = (t - self._kept_t <= HOLD_S) & (np.abs(d - self._kept_z) <= margin)
-        held = np.bincount(labels[recent], minlength=n) >= HOLD_FRACTION * total
         # The hold is not renewed on pixels certifying as static (furniture that a noisy edge
         # joined to a person for a frame).
         margin_ok = np.abs(d - self._static_z) <= margin
@@ -749,12 +848,6 @@ class BackgroundModel:
         renew &= ~certifying
         self._kept_t[renew] = t
         self._kept_z[renew] = d[renew]
-        # Entities of the start count as moving for the tracks on them (carried through a
-        # camera motion, as a moving person's are).
-        self._moving_labels = moving | initial
-        keep = moving | held | initial
-        keep[self._track_labels(labels, self._carried_uv)] = True
-        keep[0] = False
         fg = np.take(keep, labels) & candidate
         # Certified static: pixels that were dropped for STATIC_S at the same depth stay
         # dropped when a moving component joins them (furniture a person stands next to).
@@ -764,14 +857,13 @@ class BackgroundModel:
         # That surface is gone: something changed in front of it, or it left (a single
         # flying pixel at an edge does neither: the opening removed it from changed).
         gone = fg & ~margin_ok & (changed | (d > self._static_z + margin))
-        if stirred is not None:
+        if stirred_near is not None:
             # ... or it stirs: a person who stood still long enough to be certified (from the
             # start, or in a pause) and moves again by less than the margin. Where it kept its
             # depth, only its clock restarts: once nothing stirs near it for STATIC_S it is
             # static again (the chair a walker brushed past, joined to them while they stand
             # beside it, would otherwise never certify again).
-            k = 2 * COLOR_RELEASE_PX + 1
-            near = fg & cv2.dilate(stirred.view(np.uint8), np.ones((k, k), np.uint8)).view(bool)
+            near = fg & stirred_near
             self._static_since[near & margin_ok] = t
             gone |= near & ~margin_ok
         self._static_z[gone] = 0
@@ -780,21 +872,7 @@ class BackgroundModel:
         # split off for a frame), and certified they would be cut from the person for good.
         static = ((self._static_z > 0) & margin_ok & (t - self._static_since >= STATIC_S)
                   & ~there)
-        out = (fg & ~(static & ~changed)) | (edge & changed)
-        still_initial = initial & ~moving
-        if still_initial.any():
-            # The far sides of a still kept entity of the start's outline within
-            # OUTLINE_BEHIND_M behind it, as the candidate has them: they never change, and
-            # ``edge & changed`` alone would cut a still person's outline, which the
-            # background must not touch. Not a moving one's: its outline changes.
-            kept_z = np.where(np.take(still_initial, labels), d, np.float32(0))
-            near_z = cv2.dilate(kept_z, np.ones((3, 3), np.uint8))
-            out |= edge & (near_z > 0) & (d <= near_z + OUTLINE_BEHIND_M)
-        out = _with_feet(out, d, low, candidate, far_side, stride)
-        if low is not None:
-            out |= low & candidate & changed
-        self._out = out
-        return out
+        return (fg & ~(static & ~changed)) | (edge & changed)
 
     def _initial_labels(self, d: npt.NDArray[np.float32], labels: npt.NDArray[np.int32],
                         total: npt.NDArray[np.int64], margin: npt.NDArray[np.float32],

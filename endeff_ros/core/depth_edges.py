@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
+from . import kernels
+
 if TYPE_CHECKING:
     import numpy.typing as npt
 
@@ -128,3 +130,29 @@ def bridge_dropouts(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_],
                      borderType=cv2.BORDER_CONSTANT, borderValue=0)
     fill = (depth <= 0) & np.isfinite(near) & (far - near <= np.float32(BRIDGE_STEP))
     return np.where(fill, near, depth).astype(np.float32, copy=False), mask | fill
+
+
+def bridged_edges(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_], stride: int, *,
+                  flying: bool) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_],
+                                         npt.NDArray[np.bool_]]:
+    """:func:`bridge_dropouts` of ``depth`` (float32, 0: no reading) and ``mask``, and the
+    :func:`far_side_pixels` of the bridged depths: what the static background labels a frame
+    from. One compiled pass when :data:`.kernels.ENABLED`, the numpy functions otherwise
+    (the reference, and the same arrays)."""
+    if not kernels.ENABLED:
+        bridged, joined = bridge_dropouts(depth, mask)
+        return bridged, joined, far_side_pixels(bridged, stride, flying=flying)
+    bridged = np.empty_like(depth)
+    joined = np.empty_like(mask)
+    far = np.empty_like(mask)
+    kernels.bridge_and_far_side(depth, mask, _F32_EDGE_STEP, _F32_EDGE_STEP_Z, np.float32(stride),
+                                _F32_FLYING_FRACTION, _F32_BRIDGE_STEP, flying,
+                                bridged, joined, far)
+    return bridged, joined, far
+
+
+# The constants as the numpy code's float32 arithmetic rounds them (for the compiled pass).
+_F32_EDGE_STEP = np.float32(EDGE_STEP)
+_F32_EDGE_STEP_Z = np.float32(EDGE_STEP_Z)
+_F32_FLYING_FRACTION = np.float32(FLYING_FRACTION)
+_F32_BRIDGE_STEP = np.float32(BRIDGE_STEP)

@@ -1,7 +1,8 @@
 """Warm-up: run a tracker once over two synthetic frames, then forget them.
 
 The first frame a fresh process handles costs several times a later one: first calls into
-scipy and OpenCV, the optical-flow object's first run and the first large allocations. In the
+scipy and OpenCV, the optical-flow object's first run, the compiled kernels' loading
+(:mod:`.kernels`) and the first large allocations. In the
 node at 30 Hz the first frame took several frame periods, so a live camera's first frames
 arrived while the worker was busy and were skipped. The node pays this before it subscribes
 instead (docs/design.md).
@@ -13,6 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from endeff_ros.core import kernels
 from endeff_ros.core.types import KINECT_640, Intrinsics, RGBDFrame
 
 if TYPE_CHECKING:
@@ -45,6 +47,7 @@ def warm_up_frames(intrinsics: Intrinsics = KINECT_640,
 def warm_up(tracker: Tracker, intrinsics: Intrinsics = KINECT_640) -> int:
     """Run ``tracker`` over :func:`warm_up_frames`, then reset it (no track, id, floor or
     previous frame is kept). Returns the number of end-effectors of the last frame."""
+    kernels.warm_up()  # the two frames reach not every kernel
     try:
         for frame in warm_up_frames(intrinsics):
             result = tracker.update(frame)
