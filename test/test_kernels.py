@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from test_background import PARAMS, PERSON_Z, add_chair, add_person, frame, room
 
-from endeff_ros.core import kernels
+from endeff_ros.core import bands, kernels
 from endeff_ros.core.background import BackgroundModel
 from endeff_ros.core.depth_edges import bridged_edges
 from endeff_ros.core.single_frame import estimate_frame
@@ -205,3 +205,33 @@ def test_certify_compiled_equals_numpy(colour, monkeypatch):
         assert outs[1][0].any() and not outs[1][0].all()
         for a, b in zip(*outs):
             np.testing.assert_array_equal(a, b, err_msg=f'frame {k}')
+
+
+@compiled
+@pytest.mark.parametrize('seed', [0, 1, 3])
+@pytest.mark.parametrize('max_bands', [None, 3])
+def test_bands_compiled_equal_numpy(seed, max_bands, monkeypatch):
+    """The compiled band loop gives the numpy expansion's bands and bridges: on clouds of
+    blobs and limbs with sparse points (the density test), parts across an occlusion gap
+    (bridged) and parts joined off the contour (leaks)."""
+    rng = np.random.default_rng(seed)
+    parts = [rng.normal(c, s, (n, 3)) for c, s, n in (
+        ([0, 0, 2], [0.1, 0.2, 0.05], 600), ([0.3, 0.1, 2], [0.15, 0.02, 0.02], 150),
+        ([0.95, 0.1, 2], [0.03, 0.02, 0.02], 80), ([1.5, 0, 2], [0.05, 0.05, 0.05], 100))]
+    points = np.concatenate(parts)
+    graph = bands.Neighbours.build(points, 0.08)
+    dense = bands.density_mask(graph, 6)
+    entity = np.where(points[:, 0] < 1.0, 0, 1)
+    entity[rng.random(len(points)) < 0.02] = -1
+    seeds = np.array([0, 700 + seed])
+    out = []
+    for enabled in (True, False):
+        monkeypatch.setattr(kernels, 'ENABLED', enabled)
+        bridges: list[tuple[int, int]] = []
+        band = bands.expand_bands(graph, dense, seeds, 0.08, max_bands=max_bands,
+                                  points=points, entity=entity, bridge_gap=0.3,
+                                  bridges=bridges)
+        out.append((band, bridges))
+    assert (out[1][0] > 1).sum() > 100 and (out[1][0] == bands.UNREACHED).any()
+    np.testing.assert_array_equal(out[0][0], out[1][0])
+    assert out[0][1] == out[1][1] and (max_bands or out[1][1])  # bridged, unless cut short

@@ -229,6 +229,48 @@ def certify(labels, moving, by_colour, use_colour, keep, candidate, d, margin, c
             out[r, c] = (fg and not (static and not cut)) or (edge[r, c] and cut)
 
 
+@_compiled
+def grow_bands(indptr, indices, data, dense, band, curve, rim, k, max_k, mark, close, new,
+               contour):  # pragma: no cover - compiled
+    """The narrow bands of :func:`.bands.expand_bands` from the contour ``curve`` (Eqs. 1-4),
+    numbered from ``k + 1`` into ``band`` (-1: unreached) until the front dies or band
+    ``max_k`` is reached; returns the last band's number. The graph is the CSR
+    (``indptr``, ``indices``, ``data``); ``rim`` is ¾δ_L; ``mark`` and ``close`` (N, False)
+    and ``new`` and ``contour`` (N) are scratch."""
+    m = curve.shape[0]
+    contour[:m] = curve
+    while k < max_k:
+        n_new = 0
+        for a in range(m):
+            p = contour[a]
+            for e in range(indptr[p], indptr[p + 1]):
+                q = indices[e]
+                if band[q] == -1 and dense[q]:
+                    if not mark[q]:
+                        mark[q] = True
+                        new[n_new] = q
+                        n_new += 1
+                    if data[e] < rim:
+                        close[q] = True  # φ < ¾δ_L: not on the next contour (Eq. 4)
+        if n_new == 0:
+            return k
+        k += 1
+        m = 0
+        for b in range(n_new):
+            q = new[b]
+            band[q] = k
+            mark[q] = False
+            if not close[q]:
+                contour[m] = q
+                m += 1
+        if m == 0:
+            contour[:n_new] = new[:n_new]
+            m = n_new
+        for b in range(n_new):
+            close[new[b]] = False
+    return k
+
+
 def warm_up() -> None:
     """Compile the kernels (or load them from the cache) on a 2x2 image, with the types the
     callers pass: a process's first frames then pay no compilation."""
@@ -250,3 +292,6 @@ def warm_up() -> None:
     one = np.ones(1, bool)
     certify(labels, one, one, True, one, yes, z, z, yes, yes, yes, yes, ticks, z.copy(),
             ticks.copy(), z.copy(), z.copy(), ticks.copy(), 0.0, 0.2, 0.25, yes.copy())
+    index = np.zeros(2, np.intp)
+    grow_bands(index, index[:0], np.zeros(0), one, np.zeros(1, np.intp), index[:1], 0.06, 0,
+               10, ~one, ~one, index.copy(), index.copy())
