@@ -6,13 +6,16 @@ from __future__ import annotations
 import copy
 import dataclasses
 import os
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 from test_background import PARAMS, PERSON_Z, add_chair, add_person, frame, room
 
+from endeff_ros import cli_common
 from endeff_ros.core import bands, kernels
 from endeff_ros.core.background import BackgroundModel
 from endeff_ros.core.depth_edges import bridged_edges
@@ -235,3 +238,28 @@ def test_bands_compiled_equal_numpy(seed, max_bands, monkeypatch):
     assert (out[1][0] > 1).sum() > 100 and (out[1][0] == bands.UNREACHED).any()
     np.testing.assert_array_equal(out[0][0], out[1][0])
     assert out[0][1] == out[1][1] and (max_bands or out[1][1])  # bridged, unless cut short
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_while_a_kernel_compiles_is_taken_after_it(signum, monkeypatch):
+    """Ctrl-C or SIGTERM during a kernel's first call (numba compiling: raised in llvmlite's
+    ctypes callbacks, the exception would be swallowed) ends the command once the call is
+    over, not in the middle of it, and not never."""
+    done = []
+
+    def body() -> int:
+        os.kill(os.getpid(), signum)
+        time.sleep(0.05)  # an unheld signal's handler runs here
+        done.append(True)
+        return 7
+
+    previous = signal.signal(signal.SIGTERM, cli_common.raise_terminated)
+    try:
+        kernel = kernels._Compiled(body)
+        monkeypatch.setattr(kernel, '_compile', lambda: body)
+        with pytest.raises(KeyboardInterrupt):  # Terminated is one too
+            kernel()
+            time.sleep(0.5)
+        assert done == [True]
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -346,12 +346,7 @@ def expand_bands(graph: Neighbours, dense: npt.NDArray[np.bool_],
             new = np.flatnonzero(mark)
             mark[new] = False
         if new.size == 0:
-            curve = _leaks(graph, band, dense)
-            if curve.size == 0 and bridge_gap > 0 and points is not None and entity is not None:
-                curve = _bridge(points, band, dense, entity, bridge_gap, k + 1, bridges)
-                if curve.size:
-                    k += 1
-                    continue
+            curve, k = _restart(graph, band, dense, k, points, entity, bridge_gap, bridges)
             if curve.size == 0:
                 break
             continue
@@ -388,15 +383,24 @@ def _expand_compiled(graph: Neighbours, dense: npt.NDArray[np.bool_],
                                *scratch, new, contour)
         if k >= limit:
             return band
-        # The front died: on from the leaks, or across an occlusion gap.
-        curve = _leaks(graph, band, dense)
-        if curve.size == 0 and bridge_gap > 0 and points is not None and entity is not None:
-            curve = _bridge(points, band, dense, entity, bridge_gap, k + 1, bridges)
-            if curve.size:
-                k += 1
-                continue
+        curve, k = _restart(graph, band, dense, k, points, entity, bridge_gap, bridges)
         if curve.size == 0:
             return band
+
+
+def _restart(graph: Neighbours, band: npt.NDArray[np.intp], dense: npt.NDArray[np.bool_],
+             k: int, points: npt.NDArray[np.float64] | None,
+             entity: npt.NDArray[np.intp] | None, bridge_gap: float,
+             bridges: list[tuple[int, int]] | None) -> tuple[npt.NDArray[np.intp], int]:
+    """Where the bands go on once their front died after band ``k``: the :func:`_leaks`, or
+    else a seed across an occlusion gap (:func:`_bridge`, band ``k + 1``). Returns the new
+    contour (empty: the expansion ends) and the last band's number."""
+    curve = _leaks(graph, band, dense)
+    if curve.size == 0 and bridge_gap > 0 and points is not None and entity is not None:
+        curve = _bridge(points, band, dense, entity, bridge_gap, k + 1, bridges)
+        if curve.size:
+            k += 1
+    return curve, k
 
 
 def _bridge(points: npt.NDArray[np.float64], band: npt.NDArray[np.intp],

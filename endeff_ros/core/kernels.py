@@ -18,12 +18,18 @@ that is not writable), so a process pays the compilation once per machine, and
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import logging
 import os
-from typing import Any
+import signal
+import threading
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
 
 #: Whether the compiled kernels run: numba is installed and ``ENDEFF_NUMBA`` is not ``0``
 #: (callers test it at each call; the tests switch it off to compare with the numpy code).
@@ -43,9 +49,13 @@ class _Compiled:
         self.__doc__ = fn.__doc__
 
     def __call__(self, *args: Any) -> Any:
-        if self._run is None:
-            self._run = self._compile()
-        return self._run(*args)
+        if self._run is not None:
+            return self._run(*args)
+        with _signals_held():  # numba compiles, or loads its cache, in this first call
+            run = self._compile()
+            out = run(*args)
+        self._run = run
+        return out
 
     def _compile(self) -> Any:
         global ENABLED
@@ -61,6 +71,27 @@ class _Compiled:
 
 def _compiled(fn: Any) -> Any:
     return _Compiled(fn)
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """SIGINT and SIGTERM held while numba compiles: raised in one of llvmlite's ctypes
+    callbacks, their exception would be printed and swallowed, and the command would go on.
+    Each signal caught is sent again once the compilation is over (the main thread only: no
+    other thread can set handlers)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    held = (signal.SIGINT, signal.SIGTERM)
+    previous = {s: signal.signal(s, lambda signum, _frame: caught.append(signum)) for s in held}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, signal.SIG_DFL if handler is None else handler)
+        for s in dict.fromkeys(caught):
+            os.kill(os.getpid(), s)
 
 
 @_compiled
