@@ -263,3 +263,35 @@ def test_a_signal_while_a_kernel_compiles_is_taken_after_it(signum, monkeypatch)
         assert done == [True]
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+@compiled
+@pytest.mark.parametrize('told', ['all', 'kinds', 'parts'])
+@pytest.mark.parametrize('learning', [False, True])
+def test_confirm_compiled_equals_numpy(told, learning, monkeypatch):
+    """The marks of the entities of the start on random labels, verdicts and states (held,
+    parts, counted, flagged, the person's pixels), in both codes from the same state."""
+    rng = np.random.default_rng(11)
+    shape = (60, 80)
+    model = BackgroundModel()
+    first = _patchwork(rng, shape)
+    model.foreground(first, first > 0, 0, PARAMS)
+    model._init_z[:] = np.where(rng.random(shape) < 0.5, first, 0)
+    monkeypatch.setattr(BackgroundModel, 'learning', property(lambda _self: learning))
+    twin = copy.deepcopy(model)
+    for k in range(1, 6):
+        labels = rng.integers(0, 8, shape).astype(np.int32)
+        verdicts = rng.random((4, 8)) < 0.5
+        pixels = rng.random(shape) < 0.5
+        outs = []
+        for enabled, m in ((True, model), (False, twin)):
+            monkeypatch.setattr(kernels, 'ENABLED', enabled)
+            m._t = k / 10.0
+            parts = verdicts[1] if told == 'parts' else None
+            kinds = told != 'all'
+            m._confirm(labels, verdicts[0], parts, verdicts[2] if kinds else None,
+                       verdicts[3] if kinds else None, None if parts is None else pixels)
+            outs.append([m._near_since, m._init_z, m._init_seen, m._init_votes])
+        assert outs[1][2].any() == kinds
+        for a, b in zip(*outs):
+            np.testing.assert_array_equal(a, b, err_msg=f'frame {k}')

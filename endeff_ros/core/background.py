@@ -355,8 +355,13 @@ def _components_hit(labels: npt.NDArray[np.int32], n_labels: int,
     """Per pixel, whether its component (``labels``, ``n_labels`` of them) is one of ``hit``
     (0: none), at least ``min_hits`` times: a lookup table per label, faster than np.isin
     over the whole image."""
-    on = np.bincount(hit[hit > 0], minlength=n_labels)[:n_labels] >= min_hits
-    return np.take(on, labels)
+    return np.take(_labels_hit(n_labels, hit, min_hits), labels)
+
+
+def _labels_hit(n_labels: int, hit: npt.NDArray[np.int32],
+                min_hits: int = 1) -> npt.NDArray[np.bool_]:
+    """Per label (``n_labels``), whether it is one of ``hit`` (0: none) ``min_hits`` times."""
+    return np.bincount(hit[hit > 0], minlength=n_labels)[:n_labels] >= min_hits
 
 
 class BackgroundModel:
@@ -970,32 +975,59 @@ class BackgroundModel:
                else np.zeros(len(uv), np.int32))
         if hit.any() and labels is not None:
             n_labels = int(labels.max()) + 1
-            held = _components_hit(labels, n_labels, hit)
-            self._near_since[held] = self._t
-            if self._marking and self._confirming and self._last is not None:
-                # The components holding a flagged entity's points (MIN_PART_POINTS): its
-                # parts that the depth edges split off, with or without an end of their own.
-                person_uv = (None if person_points is None
-                             else self._point_uv(person_points, intrinsics, stride))
-                parts = (None if person_uv is None else _components_hit(
-                    labels, n_labels, labels[person_uv], MIN_PART_POINTS))
-                if self.learning:
-                    mark = held if parts is None else held | parts
-                    mark = mark & (self._init_z == 0) & (self._last.depth > 0)
-                    self._init_z[mark] = self._last.depth[mark]
-                if person is not None:
-                    if judged is not None:
-                        told = np.asarray(judged, dtype=bool).reshape(-1)[ok]
-                        counted = _components_hit(labels, n_labels, hit[told])
-                    else:
-                        counted = held
-                    self._init_seen[counted & (self._init_z > 0)] += 1
-                    flags = np.asarray(person, dtype=bool).reshape(-1)[ok]
-                    held = _components_hit(labels, n_labels, hit[flags])
-                    if parts is not None:
-                        held = (held | parts) & self._point_pixels(person_uv)
-                    self._init_votes[held & (self._init_z > 0)] += 1
+            held = _labels_hit(n_labels, hit)
+            if not (self._marking and self._confirming and self._last is not None):
+                self._near_since[np.take(held, labels)] = self._t
+                return ok, uv, hit
+            # The components holding a flagged entity's points (MIN_PART_POINTS): its parts
+            # that the depth edges split off, with or without an end of their own.
+            person_uv = (None if person_points is None
+                         else self._point_uv(person_points, intrinsics, stride))
+            parts = (None if person_uv is None
+                     else _labels_hit(n_labels, labels[person_uv], MIN_PART_POINTS))
+            counted = flagged = None
+            if person is not None:
+                told = None if judged is None else np.asarray(judged, dtype=bool).reshape(-1)[ok]
+                counted = held if told is None else _labels_hit(n_labels, hit[told])
+                flags = np.asarray(person, dtype=bool).reshape(-1)[ok]
+                flagged = _labels_hit(n_labels, hit[flags])
+            self._confirm(labels, held, parts, counted, flagged,
+                          None if parts is None else self._point_pixels(person_uv))
         return ok, uv, hit
+
+    def _confirm(self, labels: npt.NDArray[np.int32], held: npt.NDArray[np.bool_],
+                 parts: npt.NDArray[np.bool_] | None, counted: npt.NDArray[np.bool_] | None,
+                 flagged: npt.NDArray[np.bool_] | None,
+                 pixels: npt.NDArray[np.bool_] | None) -> None:
+        """The per-pixel marks of :meth:`_hits`, from per-label verdicts: the components
+        ``held`` by a track restart their absorption clock; while learning, they and the
+        person's ``parts`` (None: not told) are marked at the last frame's depth; with the
+        kinds told (``counted``, ``flagged``; None: not), the marked pixels of the components
+        whose frame counted count one frame more (``_init_seen``), and those of the flagged
+        ones (with the parts, within the person's ``pixels``) one vote more (``_init_votes``).
+        One compiled pass when :data:`.kernels.ENABLED`, the numpy rules otherwise."""
+        depth = self._last.depth
+        if kernels.ENABLED:
+            votes = counted is not None
+            kernels.confirm(labels, held, held if parts is None else parts, parts is not None,
+                            self.learning, held if counted is None else counted,
+                            held if flagged is None else flagged, votes,
+                            labels > 0 if pixels is None else pixels, depth, self._t,
+                            self._near_since, self._init_z, self._init_seen, self._init_votes)
+            return
+        on = np.take(held, labels)
+        self._near_since[on] = self._t
+        on_parts = None if parts is None else np.take(parts, labels)
+        if self.learning:
+            mark = on if on_parts is None else on | on_parts
+            mark = mark & (self._init_z == 0) & (depth > 0)
+            self._init_z[mark] = depth[mark]
+        if counted is not None and flagged is not None:
+            self._init_seen[np.take(counted, labels) & (self._init_z > 0)] += 1
+            voted = np.take(flagged, labels)
+            if on_parts is not None:
+                voted = (voted | on_parts) & pixels
+            self._init_votes[voted & (self._init_z > 0)] += 1
 
     @property
     def _confirming(self) -> bool:

@@ -302,6 +302,32 @@ def grow_bands(indptr, indices, data, dense, band, curve, rim, k, max_k, mark, c
     return k
 
 
+@_compiled
+def confirm(labels, held, parts, use_parts, learning, counted, flagged, votes, pixels, depth,
+            t, near_since, init_z, init_seen, init_votes):  # pragma: no cover - compiled
+    """:meth:`.background.BackgroundModel._confirm`, in place on ``near_since``, ``init_z``,
+    ``init_seen`` and ``init_votes``; per label ``held``, ``parts`` (with ``use_parts``),
+    ``counted`` and ``flagged`` (with ``votes``), per pixel the person's ``pixels``."""
+    h, w = labels.shape
+    for r in range(h):
+        for c in range(w):
+            k = labels[r, c]
+            on = held[k]
+            if on:
+                near_since[r, c] = t
+            part = use_parts and parts[k]
+            if learning and (on or part) and init_z[r, c] == 0 and depth[r, c] > 0:
+                init_z[r, c] = depth[r, c]
+            if votes and init_z[r, c] > 0:
+                if counted[k]:
+                    init_seen[r, c] += 1
+                voted = flagged[k]
+                if use_parts:
+                    voted = (voted or part) and pixels[r, c]
+                if voted:
+                    init_votes[r, c] += 1
+
+
 def warm_up() -> None:
     """Compile the kernels (or load them from the cache) on a 2x2 image, with the types the
     callers pass: a process's first frames then pay no compilation."""
@@ -323,6 +349,9 @@ def warm_up() -> None:
     one = np.ones(1, bool)
     certify(labels, one, one, True, one, yes, z, z, yes, yes, yes, yes, ticks, z.copy(),
             ticks.copy(), z.copy(), z.copy(), ticks.copy(), 0.0, 0.2, 0.25, yes.copy())
+    count16 = np.zeros((2, 2), np.uint16)
+    confirm(labels, one, one, True, True, one, one, True, yes, z, 0.0, ticks.copy(), z.copy(),
+            count16, count16.copy())
     index = np.zeros(2, np.intp)
     grow_bands(index, index[:0], np.zeros(0), one, np.zeros(1, np.intp), index[:1], 0.06, 0,
                10, ~one, ~one, index.copy(), index.copy())
