@@ -23,6 +23,7 @@ def test_this_checkout_against_itself(calls):
     report = ab_background.compare(calls, ab_background.other_model(ROOT), repeats=2)
     assert report['timed'] == sum(name == 'foreground' for name, _, _ in calls)
     assert report['ratio'] > 0 and min(report['foreground_ms'].values()) > 0
+    assert min(report['marks_ms'].values()) > 0
 
 
 def test_a_model_with_other_masks_is_refused(calls, tmp_path):
