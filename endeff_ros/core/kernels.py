@@ -75,23 +75,48 @@ def _compiled(fn: Any) -> Any:
 
 @contextlib.contextmanager
 def _signals_held() -> Iterator[None]:
-    """SIGINT and SIGTERM held while numba compiles: raised in one of llvmlite's ctypes
-    callbacks, their exception would be printed and swallowed, and the command would go on.
-    Each signal caught is sent again once the compilation is over (the main thread only: no
-    other thread can set handlers)."""
+    """SIGINT and SIGTERM kept out of llvmlite while numba compiles: raised in one of its
+    ctypes callbacks, their exception would be printed and swallowed, and the command would
+    go on. A signal that comes while llvmlite's code runs is sent again once the compilation
+    is over; elsewhere its handler runs at once (a first compilation takes seconds). The main
+    thread only: no other thread runs signal handlers."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     caught: list[int] = []
     held = (signal.SIGINT, signal.SIGTERM)
-    previous = {s: signal.signal(s, lambda signum, _frame: caught.append(signum)) for s in held}
+    previous = {s: signal.getsignal(s) for s in held}
+
+    def hold(signum: int, frame: Any) -> None:
+        if _in_llvmlite(frame):
+            caught.append(signum)
+            return
+        handler = previous[signum]
+        if callable(handler):
+            handler(signum, frame)
+        elif handler != signal.SIG_IGN:  # the default action (set outside Python: None)
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+
+    for s in held:
+        signal.signal(s, hold)
     try:
         yield
     finally:
         for s, handler in previous.items():
             signal.signal(s, signal.SIG_DFL if handler is None else handler)
         for s in dict.fromkeys(caught):
-            os.kill(os.getpid(), s)
+            if previous[s] != signal.SIG_IGN:
+                os.kill(os.getpid(), s)
+
+
+def _in_llvmlite(frame: Any) -> bool:
+    """Whether ``frame`` or a caller of it runs llvmlite's code."""
+    while frame is not None:
+        if f'{os.sep}llvmlite{os.sep}' in frame.f_code.co_filename:
+            return True
+        frame = frame.f_back
+    return False
 
 
 @_compiled
