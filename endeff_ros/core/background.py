@@ -719,8 +719,7 @@ class BackgroundModel:
             stirred.view(np.uint8), np.ones((k, k), np.uint8)).view(bool))
         out = self._certify(labels, moving, by_colour, keep, candidate, d, margin, changed, edge,
                             there, stirred_near, t)
-        moving = moved
-        still_initial = initial & ~moving
+        still_initial = initial & ~moved
         if still_initial.any():
             # The far sides of a still kept entity of the start's outline within
             # OUTLINE_BEHIND_M behind it, as the candidate has them: they never change, and
@@ -1012,7 +1011,7 @@ class BackgroundModel:
             kernels.confirm(labels, held, held if parts is None else parts, parts is not None,
                             self.learning, held if counted is None else counted,
                             held if flagged is None else flagged, votes,
-                            labels > 0 if pixels is None else pixels, depth, self._t,
+                            kernels.NO_PIXELS if pixels is None else pixels, depth, self._t,
                             self._near_since, self._init_z, self._init_seen, self._init_votes)
             return
         on = np.take(held, labels)

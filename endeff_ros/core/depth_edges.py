@@ -132,6 +132,13 @@ def bridge_dropouts(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_],
     return np.where(fill, near, depth).astype(np.float32, copy=False), mask | fill
 
 
+# The constants as the numpy code's float32 arithmetic rounds them (for the compiled pass).
+_F32_EDGE_STEP = np.float32(EDGE_STEP)
+_F32_EDGE_STEP_Z = np.float32(EDGE_STEP_Z)
+_F32_FLYING_FRACTION = np.float32(FLYING_FRACTION)
+_F32_BRIDGE_STEP = np.float32(BRIDGE_STEP)
+
+
 def bridged_edges(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_], stride: int, *,
                   flying: bool) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_],
                                          npt.NDArray[np.bool_]]:
@@ -149,10 +156,3 @@ def bridged_edges(depth: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_], s
                                 _F32_FLYING_FRACTION, _F32_BRIDGE_STEP, flying,
                                 bridged, joined, far)
     return bridged, joined, far
-
-
-# The constants as the numpy code's float32 arithmetic rounds them (for the compiled pass).
-_F32_EDGE_STEP = np.float32(EDGE_STEP)
-_F32_EDGE_STEP_Z = np.float32(EDGE_STEP_Z)
-_F32_FLYING_FRACTION = np.float32(FLYING_FRACTION)
-_F32_BRIDGE_STEP = np.float32(BRIDGE_STEP)

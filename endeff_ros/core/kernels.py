@@ -1,19 +1,20 @@
-"""Compiled per-pixel kernels of the static background (optional: numba).
+"""Compiled kernels for the loops numpy cannot fuse (optional: numba).
 
 The static background (:mod:`.background`) and its depth edges (:mod:`.depth_edges`) update
-a dozen per-pixel states of the strided image every frame. In numpy each rule is a pass over
-the whole image and an allocation, some sixty of them a frame at 20-60 µs each; these kernels
-run the same rules in one loop per stage. They are compiled with numba when it is installed
-(PyPI ``numba``, Ubuntu's ``python3-numba``) and the environment does not set
+a dozen per-pixel states of the strided image every frame: in numpy each rule is a pass over
+the whole image and an allocation, some sixty of them a frame at 20-60 µs each. The band
+expansion (:func:`.bands.expand_bands`) costs a dozen small array operations a band. These
+kernels run the same rules in one loop per stage. They are compiled with numba when it is
+installed (PyPI ``numba``, Ubuntu's ``python3-numba``) and the environment does not set
 ``ENDEFF_NUMBA=0``; otherwise :data:`ENABLED` is False and the callers run their numpy code,
 which stays the reference: ``test/test_kernels.py`` checks that both give the same arrays,
 and ``tools.fingerprint`` that both publish the same end-effectors.
 
 Arithmetic follows numpy's exactly: float32 where the arrays are float32 (the constants come
 in as float32 arguments, never Python floats, which numba would widen to float64), float64
-for the clocks. Compiled code is cached beside this module (or in numba's user cache when
-that is not writable), so a process pays the compilation once per machine, and
-:mod:`.warmup` before the first frame.
+for the clocks. numba caches the compiled code beside this module (or in its user cache when
+that is not writable): a machine compiles once, and a process then loads the code at its
+first call of each kernel, which :func:`warm_up` makes before the first frame.
 """
 
 from __future__ import annotations
@@ -69,10 +70,6 @@ class _Compiled:
         return numba.njit(cache=True, nogil=True)(self._fn)
 
 
-def _compiled(fn: Any) -> Any:
-    return _Compiled(fn)
-
-
 @contextlib.contextmanager
 def _signals_held() -> Iterator[None]:
     """SIGINT and SIGTERM kept out of llvmlite while numba compiles: raised in one of its
@@ -119,7 +116,11 @@ def _in_llvmlite(frame: Any) -> bool:
     return False
 
 
-@_compiled
+#: A stand-in for an unused per-pixel mask argument (the kernels do not read it).
+NO_PIXELS = np.zeros((1, 1), bool)
+
+
+@_Compiled
 def bridge_and_far_side(d, mask, step0, step_z, stride, fraction, bridge, flying,
                         out_z, out_mask, out_far):  # pragma: no cover - compiled
     """:func:`.depth_edges.bridge_dropouts` of ``d`` (0: no reading) and ``mask``, into
@@ -170,7 +171,7 @@ def bridge_and_far_side(d, mask, step0, step_z, stride, fraction, bridge, flying
             out_far[r, c] = far_side
 
 
-@_compiled
+@_Compiled
 def update_depths(d, valid, known, nearer, farther, margin, bg, far_n, far_ref, far_t,
                   miss_n, near_ref, near_since, t, absorb_s, follow, far_frames, miss_frames,
                   new_bg, changed, adopt):  # pragma: no cover - compiled
@@ -224,7 +225,7 @@ def update_depths(d, valid, known, nearer, farther, margin, bg, far_n, far_ref, 
             changed[r, c] = 1 if ((nearer[r, c] and not absorbed) or (fresh and not taken)) else 0
 
 
-@_compiled
+@_Compiled
 def label_counts(labels, changed, stirred, use_stirred, d, kept_t, kept_z, margin, t, hold_s,
                  n_changed, n_stirred, n_recent):  # pragma: no cover - compiled
     """Per label of ``labels``, its pixels that ``changed``, that ``stirred`` (with
@@ -242,7 +243,7 @@ def label_counts(labels, changed, stirred, use_stirred, d, kept_t, kept_z, margi
                 n_recent[k] += 1
 
 
-@_compiled
+@_Compiled
 def certify(labels, moving, by_colour, use_colour, keep, candidate, d, margin, changed, edge,
             there, stirred_near, colour_t, colour_z, kept_t, kept_z, static_z, static_since, t,
             confirm_s, static_s, out):  # pragma: no cover - compiled
@@ -285,7 +286,7 @@ def certify(labels, moving, by_colour, use_colour, keep, candidate, d, margin, c
             out[r, c] = (fg and not (static and not cut)) or (edge[r, c] and cut)
 
 
-@_compiled
+@_Compiled
 def grow_bands(indptr, indices, data, dense, band, curve, rim, k, max_k, mark, close, new,
                contour):  # pragma: no cover - compiled
     """The narrow bands of :func:`.bands.expand_bands` from the contour ``curve`` (Eqs. 1-4),
@@ -327,7 +328,7 @@ def grow_bands(indptr, indices, data, dense, band, curve, rim, k, max_k, mark, c
     return k
 
 
-@_compiled
+@_Compiled
 def confirm(labels, held, parts, use_parts, learning, counted, flagged, votes, pixels, depth,
             t, near_since, init_z, init_seen, init_votes):  # pragma: no cover - compiled
     """:meth:`.background.BackgroundModel._confirm`, in place on ``near_since``, ``init_z``,
