@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from test_background import PARAMS, PERSON_Z, add_chair, add_person, frame, room
 
-from endeff_ros import cli_common
+from endeff_ros import cli_common, workers
 from endeff_ros.core import bands, kernels
 from endeff_ros.core.background import BackgroundModel
 from endeff_ros.core.depth_edges import bridged_edges
@@ -306,3 +306,23 @@ def test_confirm_compiled_equals_numpy(told, learning, monkeypatch):
         assert outs[1][2].any() == kinds
         for a, b in zip(*outs):
             np.testing.assert_array_equal(a, b, err_msg=f'frame {k}')
+
+
+def test_a_handler_that_changes_its_signal_keeps_its_change(monkeypatch):
+    """A worker's SIGTERM handler raises once and then ignores SIGTERM (the parent sends it
+    again): run during a kernel's first call, that stays so after the call, and the second
+    SIGTERM cannot break the cleanup of the first."""
+    previous = signal.signal(signal.SIGTERM, workers._on_sigterm)
+
+    def body() -> None:
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.05)
+
+    try:
+        kernel = kernels._Compiled(body)
+        monkeypatch.setattr(kernel, '_compile', lambda: body)
+        with pytest.raises(KeyboardInterrupt):
+            kernel()
+        assert signal.getsignal(signal.SIGTERM) == signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -101,7 +101,8 @@ def _signals_held() -> Iterator[None]:
         yield
     finally:
         for s, handler in previous.items():
-            signal.signal(s, signal.SIG_DFL if handler is None else handler)
+            if signal.getsignal(s) is hold:  # not where a handler set another (SIG_IGN once run)
+                signal.signal(s, signal.SIG_DFL if handler is None else handler)
         for s in dict.fromkeys(caught):
             if previous[s] != signal.SIG_IGN:
                 os.kill(os.getpid(), s)
